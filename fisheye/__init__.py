@@ -1,0 +1,47 @@
+"""FishLoc geometry: Kannala–Brandt fisheye cameras, radius-aligned boxes, calibration files.
+
+numpy-only (plus OpenCV and pydantic); see DESIGN.md for the conventions.
+"""
+
+from fisheye.boxes import (
+    cepdof_to_radius_aligned,
+    cxcywh_to_corners,
+    foot_points,
+    radial_angles_rad,
+    radius_aligned_to_cepdof,
+)
+from fisheye.camera import FisheyeCamera, FloorPoints
+from fisheye.camera_file import (
+    CalibrationError,
+    camera_from_dict,
+    camera_from_opencv,
+    camera_to_dict,
+    load_camera,
+    load_cameras,
+    save_camera,
+)
+from fisheye.letterbox import Letterbox
+from fisheye.rotated import polygon_iou, rotated_iou, rotated_nms
+from fisheye.site import SitePose
+
+__all__ = [
+    "CalibrationError",
+    "FisheyeCamera",
+    "FloorPoints",
+    "Letterbox",
+    "SitePose",
+    "camera_from_dict",
+    "camera_from_opencv",
+    "camera_to_dict",
+    "cepdof_to_radius_aligned",
+    "cxcywh_to_corners",
+    "foot_points",
+    "load_camera",
+    "load_cameras",
+    "polygon_iou",
+    "radial_angles_rad",
+    "radius_aligned_to_cepdof",
+    "rotated_iou",
+    "rotated_nms",
+    "save_camera",
+]

@@ -1,0 +1,212 @@
+"""A calibrated overhead fisheye camera: Kannala–Brandt lens, altitude, and the floor below it.
+
+Frames (DESIGN.md): pixels `u` right, `v` down, centres at integers. The floor frame has its origin
+at the nadir, `x` towards image right, `y` towards image top, `z` up; rays are unit vectors in that
+frame pointing away from the lens (straight down is (0, 0, -1)).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from fisheye.arrays import as_points
+from fisheye.lens import monotonic_violation, radius_to_theta, theta_to_radius
+from fisheye.site import SitePose
+
+FloatArray = NDArray[np.float64]
+
+CAMERA_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
+_CAMERA_ID_RE = re.compile(CAMERA_ID_PATTERN)
+DEFAULT_MAX_THETA_DEG = 90.0
+# Frames whose aspect ratio differs from the calibration's by more than one pixel are refused.
+_ASPECT_TOLERANCE_PX = 1.0
+
+
+@dataclass(frozen=True)
+class FloorPoints:
+    """Floor positions of N pixels: `xy_m` (N, 2) m and `distance_m` (N,) m from the nadir, NaN
+    where `valid` (N,) is False (the ray misses the floor or leaves the calibrated field)."""
+
+    xy_m: FloatArray
+    distance_m: FloatArray
+    valid: NDArray[np.bool_]
+
+    def __post_init__(self) -> None:
+        n = len(self.valid)
+        if self.xy_m.shape != (n, 2) or self.distance_m.shape != (n,):
+            raise ValueError(
+                f"FloorPoints arrays disagree: xy_m {self.xy_m.shape}, "
+                f"distance_m {self.distance_m.shape}, valid {self.valid.shape}"
+            )
+
+
+class FisheyeCamera(BaseModel):
+    """One camera's calibration record (the camera file of DESIGN.md) and its geometry."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    id: str = Field(description="Camera id: letters, digits, '.', '_', '-'; at most 64 characters.")
+    altitude_m: float = Field(gt=0, le=1000, description="Lens height above the floor (m).")
+    image_size: tuple[int, int] = Field(description="[width, height] the calibration was made at (px).")
+    principal_point: tuple[float, float] = Field(description="[u0, v0] (px).")
+    focal_px: tuple[float, float] = Field(description="[fx, fy] (px per unit normalised radius).")
+    kb: list[float] = Field(min_length=1, max_length=5, description="k1..k5 of r(θ).")
+    max_theta_deg: float | None = Field(default=None, gt=0, lt=180)
+    site_pose: SitePose | None = None
+
+    @field_validator("id")
+    @classmethod
+    def _check_id(cls, value: str) -> str:
+        if not _CAMERA_ID_RE.match(value):
+            raise ValueError(
+                "camera id must be 1-64 characters of letters, digits, '.', '_' or '-', "
+                "starting with a letter or digit"
+            )
+        return value
+
+    @field_validator("image_size")
+    @classmethod
+    def _check_image_size(cls, value: tuple[int, int]) -> tuple[int, int]:
+        if min(value) < 2 or max(value) > 20000:
+            raise ValueError(f"image_size must be within [2, 20000] px, got {list(value)}")
+        return value
+
+    @field_validator("focal_px")
+    @classmethod
+    def _check_focal(cls, value: tuple[float, float]) -> tuple[float, float]:
+        if min(value) <= 0:
+            raise ValueError(f"focal_px must be positive, got {list(value)}")
+        return value
+
+    @model_validator(mode="after")
+    def _check_geometry(self) -> FisheyeCamera:
+        width, height = self.image_size
+        u0, v0 = self.principal_point
+        if not (0 <= u0 <= width - 1 and 0 <= v0 <= height - 1):
+            raise ValueError(
+                f"principal_point {list(self.principal_point)} lies outside the image "
+                f"{width}x{height}"
+            )
+        if self.kb[0] <= 0:
+            raise ValueError(f"kb[0] (k1) must be positive, got {self.kb[0]}")
+        bad_theta = monotonic_violation(self.kb, self.theta_max_rad)
+        if bad_theta is not None:
+            raise ValueError(
+                f"kb {self.kb}: r(θ) is not strictly increasing on [0, {self.theta_max_deg:g}°] "
+                f"(it stops at θ = {math.degrees(bad_theta):.2f}°); lower max_theta_deg or fix kb"
+            )
+        return self
+
+    # ----- derived values
+
+    @property
+    def theta_max_deg(self) -> float:
+        return DEFAULT_MAX_THETA_DEG if self.max_theta_deg is None else self.max_theta_deg
+
+    @property
+    def theta_max_rad(self) -> float:
+        return math.radians(self.theta_max_deg)
+
+    @property
+    def resolution_wh(self) -> tuple[int, int]:
+        return self.image_size
+
+    def scaled_to(self, resolution_wh: tuple[int, int]) -> FisheyeCamera:
+        """This camera for frames of another resolution with the same aspect ratio.
+
+        Pixel centres sit at integers, so a pixel coordinate maps as u' = (u + 0.5)·s − 0.5 (as
+        cv2.resize does); focal lengths scale by s.
+        """
+        width, height = int(resolution_wh[0]), int(resolution_wh[1])
+        if (width, height) == tuple(self.image_size):
+            return self
+        calib_w, calib_h = self.image_size
+        if width < 1 or height < 1:
+            raise ValueError(f"frame size must be positive, got {width}x{height}")
+        if abs(width * calib_h - height * calib_w) > _ASPECT_TOLERANCE_PX * max(calib_w, calib_h):
+            raise ValueError(
+                f"frame {width}x{height} does not have the aspect ratio of camera {self.id!r}'s "
+                f"calibration ({calib_w}x{calib_h})"
+            )
+        scale_u, scale_v = width / calib_w, height / calib_h
+        u0, v0 = self.principal_point
+        fx, fy = self.focal_px
+        return self.model_copy(
+            update={
+                "image_size": (width, height),
+                "principal_point": ((u0 + 0.5) * scale_u - 0.5, (v0 + 0.5) * scale_v - 0.5),
+                "focal_px": (fx * scale_u, fy * scale_v),
+            }
+        )
+
+    # ----- pixels <-> rays
+
+    def pixels_to_angles(self, uv_px: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """(N, 2) px -> θ (N,) rad from the optical axis and φ (N,) rad, the floor-frame azimuth
+        (counter-clockwise from +x). θ is NaN outside the calibrated field (θ > θmax)."""
+        uv = as_points(uv_px, 2, "uv_px")
+        x_norm = (uv[:, 0] - self.principal_point[0]) / self.focal_px[0]
+        y_norm = -(uv[:, 1] - self.principal_point[1]) / self.focal_px[1]
+        theta = radius_to_theta(np.hypot(x_norm, y_norm), self.kb, self.theta_max_rad)
+        phi = np.arctan2(y_norm, x_norm)
+        return theta, phi
+
+    def pixels_to_rays(self, uv_px: ArrayLike) -> FloatArray:
+        """(N, 2) px -> (N, 3) unit rays in the floor frame; NaN rows outside the calibrated field."""
+        theta, phi = self.pixels_to_angles(uv_px)
+        sin_theta = np.sin(theta)
+        return np.stack([sin_theta * np.cos(phi), sin_theta * np.sin(phi), -np.cos(theta)], axis=1)
+
+    def rays_to_pixels(self, rays: ArrayLike) -> FloatArray:
+        """(N, 3) rays in the floor frame (any length) -> (N, 2) px; NaN rows beyond θmax."""
+        directions = as_points(rays, 3, "rays")
+        horizontal = np.hypot(directions[:, 0], directions[:, 1])
+        theta = np.arctan2(horizontal, -directions[:, 2])
+        radius = theta_to_radius(theta, self.kb)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cos_phi = np.where(horizontal > 0, directions[:, 0] / horizontal, 1.0)
+            sin_phi = np.where(horizontal > 0, directions[:, 1] / horizontal, 0.0)
+        u = self.principal_point[0] + self.focal_px[0] * radius * cos_phi
+        v = self.principal_point[1] - self.focal_px[1] * radius * sin_phi
+        uv = np.stack([u, v], axis=1)
+        uv[theta > self.theta_max_rad + 1e-12] = np.nan
+        return uv
+
+    # ----- pixels <-> floor
+
+    def floor_positions(self, uv_px: ArrayLike) -> FloorPoints:
+        """(N, 2) px -> floor positions with distances and a validity mask (see FloorPoints)."""
+        theta, phi = self.pixels_to_angles(uv_px)
+        valid = np.isfinite(theta) & np.isfinite(phi) & (theta < math.pi / 2)
+        distance = np.full(theta.shape, np.nan)
+        distance[valid] = self.altitude_m * np.tan(theta[valid])
+        xy = np.stack([distance * np.cos(phi), distance * np.sin(phi)], axis=1)
+        return FloorPoints(xy_m=xy, distance_m=distance, valid=valid)
+
+    def pixels_to_floor(self, uv_px: ArrayLike) -> FloatArray:
+        """(N, 2) px -> (N, 2) m on the floor; NaN where there is no floor point."""
+        return self.floor_positions(uv_px).xy_m
+
+    def world_to_pixels(self, xyz_m: ArrayLike) -> FloatArray:
+        """(N, 3) points in the floor frame (m, z up) -> (N, 2) px; NaN beyond θmax."""
+        points = as_points(xyz_m, 3, "xyz_m")
+        return self.rays_to_pixels(points - np.array([0.0, 0.0, self.altitude_m]))
+
+    def floor_to_pixels(self, xy_m: ArrayLike) -> FloatArray:
+        """(N, 2) m on the floor -> (N, 2) px; NaN beyond θmax."""
+        points = as_points(xy_m, 2, "xy_m")
+        return self.world_to_pixels(np.concatenate([points, np.zeros((len(points), 1))], axis=1))
+
+    def floor_to_site(self, xy_m: ArrayLike) -> FloatArray | None:
+        """(N, 2) floor-frame m -> (N, 2) site-frame m, or None when the camera has no site pose."""
+        return None if self.site_pose is None else self.site_pose.floor_to_site(xy_m)
+
+    def image_circle_radius_px(self) -> float:
+        """Radius (px, along u) of the calibrated field θ ≤ θmax around the principal point."""
+        return float(self.focal_px[0] * theta_to_radius(self.theta_max_rad, self.kb))

@@ -1,0 +1,161 @@
+"""Camera files (YAML or JSON, the schema of DESIGN.md) and OpenCV fisheye imports."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from pydantic import ValidationError
+
+from fisheye.camera import FisheyeCamera
+
+
+class CalibrationError(ValueError):
+    """A camera file or calibration that cannot be used; the message names the field at fault."""
+
+
+def _describe(error: ValidationError) -> str:
+    parts = []
+    for item in error.errors():
+        field = ".".join(str(p) for p in item["loc"]) or "camera"
+        parts.append(f"{field}: {item['msg']}")
+    return "; ".join(parts)
+
+
+def camera_from_dict(record: Mapping[str, Any]) -> FisheyeCamera:
+    """A validated camera from a camera-file dict; CalibrationError names every bad field."""
+    try:
+        return FisheyeCamera.model_validate(dict(record))
+    except ValidationError as error:
+        raise CalibrationError(f"invalid camera: {_describe(error)}") from None
+
+
+def read_camera_records(path: str | Path) -> list[dict[str, Any]]:
+    """The camera dicts of one YAML/JSON file (a camera, a list of cameras, or {cameras: [...]})."""
+    file = Path(path)
+    try:
+        text = file.read_text(encoding="utf-8")
+    except OSError as error:
+        raise CalibrationError(f"cannot read camera file {file}: {error.strerror}") from None
+    try:
+        data = json.loads(text) if file.suffix.lower() == ".json" else yaml.safe_load(text)
+    except (json.JSONDecodeError, yaml.YAMLError) as error:
+        raise CalibrationError(f"{file} is not valid YAML/JSON: {error}") from None
+    if isinstance(data, Mapping) and "cameras" in data:
+        data = data["cameras"]
+    records = data if isinstance(data, list) else [data]
+    if not all(isinstance(r, Mapping) for r in records):
+        raise CalibrationError(f"{file} must hold a camera mapping or a list of them")
+    return [dict(r) for r in records]
+
+
+def load_camera(source: str | Path | Mapping[str, Any]) -> FisheyeCamera:
+    """A camera from a camera file (YAML/JSON path) or its dict."""
+    if isinstance(source, Mapping):
+        return camera_from_dict(source)
+    records = read_camera_records(source)
+    if len(records) != 1:
+        raise CalibrationError(f"{source} holds {len(records)} cameras; load_cameras reads several")
+    try:
+        return camera_from_dict(records[0])
+    except CalibrationError as error:
+        raise CalibrationError(f"{source}: {error}") from None
+
+
+def load_cameras(source: str | Path) -> list[FisheyeCamera]:
+    """Every camera of a camera file, or of all *.yaml/*.yml/*.json files in a folder."""
+    path = Path(source)
+    files = sorted(
+        p for p in path.iterdir() if p.suffix.lower() in {".yaml", ".yml", ".json"}
+    ) if path.is_dir() else [path]
+    cameras = []
+    for file in files:
+        for record in read_camera_records(file):
+            try:
+                cameras.append(camera_from_dict(record))
+            except CalibrationError as error:
+                raise CalibrationError(f"{file}: {error}") from None
+    return cameras
+
+
+def camera_to_dict(camera: FisheyeCamera) -> dict[str, Any]:
+    """The camera-file dict of a camera (optional fields left out when unset)."""
+    return camera.model_dump(mode="json", exclude_none=True)
+
+
+def save_camera(camera: FisheyeCamera, path: str | Path) -> None:
+    """Write a camera file; JSON for a .json path, YAML otherwise."""
+    file = Path(path)
+    record = camera_to_dict(camera)
+    if file.suffix.lower() == ".json":
+        text = json.dumps(record, indent=2) + "\n"
+    else:
+        text = yaml.safe_dump(record, sort_keys=False, default_flow_style=None)
+    file.write_text(text, encoding="utf-8")
+
+
+def camera_from_opencv(
+    camera_id: str,
+    K: Sequence[Sequence[float]] | np.ndarray,
+    D: Sequence[float] | np.ndarray,
+    image_size: tuple[int, int],
+    altitude_m: float,
+    **extra: Any,
+) -> FisheyeCamera:
+    """A camera from an OpenCV fisheye calibration: 3x3 `K`, `D` = [d1, d2, d3, d4].
+
+    OpenCV's θ_d = θ(1 + d1θ² + d2θ⁴ + d3θ⁶ + d4θ⁸) is r(θ) with kb = [1, d1, d2, d3, d4].
+    """
+    matrix = np.asarray(K, dtype=np.float64).reshape(3, 3)
+    distortion = np.asarray(D, dtype=np.float64).reshape(-1)
+    if distortion.size != 4:
+        raise CalibrationError(f"D must hold 4 coefficients, got {distortion.size}")
+    if abs(matrix[0, 1]) > 1e-9:
+        raise CalibrationError("K has a skew term; FishLoc's camera model has none")
+    return camera_from_dict({
+        "id": camera_id,
+        "altitude_m": altitude_m,
+        "image_size": list(image_size),
+        "principal_point": [matrix[0, 2], matrix[1, 2]],
+        "focal_px": [matrix[0, 0], matrix[1, 1]],
+        "kb": [1.0, *distortion.tolist()],
+        **extra,
+    })
+
+
+def read_opencv_calibration(path: str | Path) -> tuple[np.ndarray, np.ndarray, tuple[int, int] | None]:
+    """`K`, `D` and the image size (if stored) from an OpenCV FileStorage YAML/JSON file, or a
+    plain YAML/JSON with `K` (3x3 or 9 numbers), `D` and optional `image_size` [w, h]."""
+    import cv2
+
+    file = Path(path)
+    text = file.read_text(encoding="utf-8")
+    if text.lstrip().startswith("%YAML") or "opencv-matrix" in text:
+        storage = cv2.FileStorage(str(file), cv2.FILE_STORAGE_READ)
+        try:
+            K, D = storage.getNode("K").mat(), storage.getNode("D").mat()
+            size_node = storage.getNode("image_size")
+            size = None
+            if not size_node.empty():
+                values = size_node.mat() if size_node.isMap() else [
+                    size_node.at(i).real() for i in range(size_node.size())
+                ]
+                flat = np.asarray(values).reshape(-1)
+                size = (int(flat[0]), int(flat[1]))
+        finally:
+            storage.release()
+        if K is None or D is None:
+            raise CalibrationError(f"{file}: FileStorage needs nodes K and D")
+        return np.asarray(K, dtype=np.float64), np.asarray(D, dtype=np.float64).reshape(-1), size
+    data = json.loads(text) if file.suffix.lower() == ".json" else yaml.safe_load(text)
+    if not isinstance(data, Mapping) or "K" not in data or "D" not in data:
+        raise CalibrationError(f"{file}: expected fields K and D")
+    K = np.asarray(data["K"], dtype=np.float64).reshape(3, 3)
+    D = np.asarray(data["D"], dtype=np.float64).reshape(-1)
+    size_value = data.get("image_size")
+    size = (int(size_value[0]), int(size_value[1])) if size_value is not None else None
+    return K, D, size
