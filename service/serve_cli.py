@@ -11,6 +11,7 @@ from pathlib import Path
 from pydantic import ValidationError
 
 from fisheye import CalibrationError
+from models import DEFAULT_MODEL_PATH
 from service.config import Settings
 from service.logs import configure_logging
 from service.onnx_model import ModelError
@@ -57,7 +58,11 @@ def run(args: argparse.Namespace) -> int:
     try:
         asyncio.run(run_service(settings))
     except ModelError as error:
-        print(f"fishloc serve: cannot load the model: {error}", file=sys.stderr)
+        hint = ""
+        if settings.model == DEFAULT_MODEL_PATH and not settings.model.exists():
+            hint = ("\nThe shipped default model is missing from this checkout; make it with `fishloc export` "
+                    "(README, section Model) or pass --model PATH.")
+        print(f"fishloc serve: cannot load the model: {error}{hint}", file=sys.stderr)
         return 2
     except CalibrationError as error:
         print(f"fishloc serve: bad camera file: {error}", file=sys.stderr)
