@@ -60,8 +60,8 @@ def run(args: argparse.Namespace) -> int:
     except ModelError as error:
         hint = ""
         if settings.model == DEFAULT_MODEL_PATH and not settings.model.exists():
-            hint = ("\nThe shipped default model is missing from this checkout; make it with `fishloc export` "
-                    "(README, section Model) or pass --model PATH.")
+            hint = ("\nThe shipped default model is missing from this checkout; make it with "
+                    "`fishloc export` (README) or pass --model PATH.")
         print(f"fishloc serve: cannot load the model: {error}{hint}", file=sys.stderr)
         return 2
     except CalibrationError as error:
