@@ -1,7 +1,8 @@
 """One FishLoc service instance: the state (model, registry, metrics) and the servers over it.
 
-`Service.start()` serves REST (uvicorn) on the running event loop; `Service.stop()` shuts it down
-after answering the requests in flight. `fishloc serve` and the tests both use it.
+`Service.start()` serves REST (uvicorn) and gRPC (grpc.aio) side by side on the running event loop;
+`Service.stop()` shuts both down after answering the requests and streamed frames in flight.
+`fishloc serve` and the tests both use it.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from service.app import create_app
 from service.cameras import CameraRegistry
 from service.config import Settings
 from service.dependencies import ServiceState
+from service.grpc_server import GrpcFrontEnd
 from service.metrics import ServiceMetrics
 from service.runner import build_runner
 
@@ -42,13 +44,14 @@ def build_state(settings: Settings) -> ServiceState:
 
 
 class Service:
-    """REST beside (later) gRPC, over one ServiceState, on the running event loop."""
+    """REST beside gRPC over one ServiceState, on the running event loop."""
 
     def __init__(self, state: ServiceState, warm_up: bool = True) -> None:
         self.state = state
         self.warm_up = warm_up
         self._http: uvicorn.Server | None = None
         self._http_task: asyncio.Task[None] | None = None
+        self.grpc: GrpcFrontEnd | None = None
 
     @property
     def http_port(self) -> int:
@@ -57,8 +60,17 @@ class Service:
         port: int = self._http.servers[0].sockets[0].getsockname()[1]
         return port
 
+    @property
+    def grpc_port(self) -> int:
+        if self.grpc is None:
+            raise RuntimeError("gRPC is not running")
+        return self.grpc.port
+
     async def start(self) -> None:
         settings = self.state.settings
+        if settings.grpc_port >= 0:
+            self.grpc = GrpcFrontEnd(self.state)
+            await self.grpc.start()
         config = uvicorn.Config(
             create_app(self.state, warm_up=self.warm_up), host=settings.host, port=settings.http_port,
             log_config=None, access_log=False, lifespan="on", timeout_graceful_shutdown=30,
@@ -79,6 +91,8 @@ class Service:
 
     async def stop(self) -> None:
         """Stop accepting, answer what is in flight, then release the model and the database."""
+        if self.grpc is not None:
+            await self.grpc.stop()
         if self._http is not None:
             self._http.should_exit = True
         await self.wait()
