@@ -34,7 +34,8 @@ D = np.array([-0.0213, 0.00117, -0.0002, 0.00001])
 
 
 @pytest.mark.parametrize("suffix", [".yaml", ".yml", ".json"])
-@pytest.mark.parametrize("record", [RECORD, {k: v for k, v in RECORD.items() if k not in ("max_theta_deg", "site_pose")}])
+@pytest.mark.parametrize("record", [RECORD, {k: v for k, v in RECORD.items() if k not in ("max_theta_deg",
+                                                                                          "site_pose")}])
 def test_save_load_round_trip(tmp_path: Path, suffix: str, record: dict[str, Any]) -> None:
     camera = camera_from_dict(record)
     path = tmp_path / f"camera{suffix}"
