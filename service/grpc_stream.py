@@ -103,6 +103,9 @@ class FrameStream:
         lane = self._lanes.setdefault(request.camera_id, _Lane())
         slot = _Slot(request)
         lane.order.append(slot)
+        if self._stopping.is_set():  # read in the same instant as the stop: answered, not processed
+            self._drop(lane, slot, "shutting_down", "the server is shutting down")
+            return
         if not lane.busy:
             lane.busy = True
             task = asyncio.create_task(self._work(lane, slot))
@@ -119,6 +122,8 @@ class FrameStream:
             iterator = aiter(self._requests)
             while not self._stopping.is_set():
                 await self._room.wait()
+                if self._stopping.is_set():
+                    break
                 next_request = asyncio.ensure_future(anext(iterator))
                 done, _ = await asyncio.wait({next_request, stop}, return_when=asyncio.FIRST_COMPLETED)
                 if next_request not in done:
