@@ -8,7 +8,10 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
+import signal
+from collections.abc import Iterator
 
 import uvicorn
 
@@ -24,6 +27,15 @@ from service.runner import build_runner
 log = logging.getLogger(__name__)
 
 DEMO_SEED_KEY = "seeded:demo"
+
+
+class _HttpServer(uvicorn.Server):
+    """uvicorn without its own signal handling: `run_service` stops REST and gRPC together (uvicorn
+    would re-raise the signal after its own shutdown and kill the process before gRPC's)."""
+
+    @contextlib.contextmanager
+    def capture_signals(self) -> Iterator[None]:
+        yield
 
 
 def build_state(settings: Settings) -> ServiceState:
@@ -75,7 +87,7 @@ class Service:
             create_app(self.state, warm_up=self.warm_up), host=settings.host, port=settings.http_port,
             log_config=None, access_log=False, lifespan="on", timeout_graceful_shutdown=30,
         )
-        self._http = uvicorn.Server(config)
+        self._http = _HttpServer(config)
         self._http_task = asyncio.create_task(self._http.serve())
         while not self._http.started:
             if self._http_task.done():
@@ -87,24 +99,32 @@ class Service:
     async def wait(self) -> None:
         """Until the HTTP server exits (SIGINT/SIGTERM in the main thread, or `stop`)."""
         if self._http_task is not None:
-            await self._http_task
+            await asyncio.shield(self._http_task)  # a waiter being cancelled must not stop the server
 
     async def stop(self) -> None:
         """Stop accepting, answer what is in flight, then release the model and the database."""
-        if self.grpc is not None:
-            await self.grpc.stop()
         if self._http is not None:
             self._http.should_exit = True
-        await self.wait()
+        stopping = [self.wait()] if self.grpc is None else [self.grpc.stop(), self.wait()]
+        await asyncio.gather(*stopping)
         self.state.runner.close()
         self.state.registry.close()
 
 
 async def run_service(settings: Settings) -> None:
-    """Serve until interrupted."""
+    """Serve until SIGINT or SIGTERM, then shut down gracefully."""
     service = Service(build_state(settings))
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
     await service.start()
     try:
-        await service.wait()
+        waiters = {asyncio.create_task(stop.wait()), asyncio.create_task(service.wait())}
+        _, pending = await asyncio.wait(waiters, return_when=asyncio.FIRST_COMPLETED)
+        for task in pending:
+            task.cancel()
+        log.info("shutting down: answering what is in flight")
     finally:
         await service.stop()
+    log.info("stopped")

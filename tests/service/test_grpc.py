@@ -6,6 +6,7 @@ The model is the plumbing test double (see service_doubles).
 from __future__ import annotations
 
 import asyncio
+import threading
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -279,3 +280,33 @@ def test_health_is_not_serving_before_warm_up(settings_for: Callable[..., Settin
     finally:
         live.stop()
 
+
+
+def test_shutdown_ends_open_streams_after_answering(settings_for: Callable[..., Settings],
+                                                    frames: list[bytes]) -> None:
+    live = LiveServer(settings_for(grpc_port=0)).start()
+    stopper = threading.Thread(target=live.stop)
+
+    async def scenario() -> tuple[list[pb.DetectResponse], grpc.StatusCode]:
+        async with grpc.aio.insecure_channel(target(live)) as channel:
+            call = pb_grpc.LocalizerStub(channel).StreamDetect()
+            for i in range(5):
+                await call.write(request("demo", f"s-{i}", frames[i % len(frames)]))
+            responses = [await call.read()]
+            stopper.start()  # the gateway has not finished; the server ends the stream
+            while (response := await call.read()) != grpc.aio.EOF:
+                responses.append(response)
+            return responses, await call.code()
+
+    try:
+        responses, code = run(scenario())
+    finally:
+        if stopper.ident is None:
+            live.stop()
+        else:
+            stopper.join(30)
+    assert code == grpc.StatusCode.OK
+    ids = [r.frame_id for r in responses]
+    assert ids == [f"s-{i}" for i in range(len(ids))] and len(ids) >= 1
+    for response in responses:
+        assert response.status == Status.OK or response.error_code in ("newer_frame", "shutting_down")
