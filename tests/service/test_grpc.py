@@ -15,10 +15,10 @@ import grpc
 import httpx
 import numpy as np
 import pytest
-from conftest import encode, person_frame
 from grpc_health.v1 import health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection_pb2, reflection_pb2_grpc
 from live_server import LiveServer
+from service_frames import encode, person_frame
 
 from fisheye import FisheyeCamera, camera_to_dict
 from protos.fishloc.v1 import localizer_pb2 as pb

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import httpx
 import pytest
-from conftest import encode, person_frame
 from live_server import LiveServer
+from service_frames import encode, person_frame
 
 from fisheye import FisheyeCamera
 

@@ -17,8 +17,8 @@ from typing import Any
 import cv2
 import numpy as np
 import pytest
-from conftest import encode, person_frame
 from live_server import LiveServer
+from service_frames import encode, person_frame
 
 from fisheye import FisheyeCamera
 from service.config import Settings
