@@ -7,8 +7,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from live_server import LiveServer
 from service_doubles import save_double_model
+from service_live_server import LiveServer
 
 from fisheye import FisheyeCamera, load_camera
 from models import DEMO_CAMERA_PATH

@@ -12,8 +12,8 @@ import cv2
 import httpx
 import numpy as np
 import pytest
-from live_server import LiveServer
 from service_frames import encode, person_frame
+from service_live_server import LiveServer
 
 from fisheye import FisheyeCamera, camera_to_dict
 from service.config import Settings

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import httpx
 import pytest
-from live_server import LiveServer
 from service_frames import encode, person_frame
+from service_live_server import LiveServer
 
 from fisheye import FisheyeCamera
 
