@@ -11,6 +11,7 @@ import asyncio
 import contextlib
 import logging
 import signal
+import socket
 from collections.abc import Iterator
 
 import uvicorn
@@ -87,11 +88,21 @@ class Service:
             create_app(self.state, warm_up=self.warm_up), host=settings.host, port=settings.http_port,
             log_config=None, access_log=False, lifespan="on", timeout_graceful_shutdown=30,
         )
+        try:
+            # Bound here so that a taken port is a clear OSError, not uvicorn's sys.exit.
+            sock = socket.create_server((settings.host, settings.http_port), reuse_port=False)
+        except OSError as error:
+            if self.grpc is not None:
+                await self.grpc.stop(grace_s=0)
+            where = f"{settings.host}:{settings.http_port}"
+            raise OSError(f"cannot listen for REST on {where}: {error.strerror}") from None
         self._http = _HttpServer(config)
-        self._http_task = asyncio.create_task(self._http.serve())
+        self._http_task = asyncio.create_task(self._http.serve(sockets=[sock]))
         while not self._http.started:
             if self._http_task.done():
-                await self._http_task  # raises what made start-up fail
+                if self.grpc is not None:
+                    await self.grpc.stop(grace_s=0)
+                # uvicorn logs the cause (e.g. the port is taken) and exits its task.
                 raise RuntimeError(f"the HTTP server did not start on {settings.host}:{settings.http_port}")
             await asyncio.sleep(0.01)
         log.info("REST listening on http://%s:%d", settings.host, self.http_port)

@@ -310,3 +310,11 @@ def test_shutdown_ends_open_streams_after_answering(settings_for: Callable[..., 
     assert ids == [f"s-{i}" for i in range(len(ids))] and len(ids) >= 1
     for response in responses:
         assert response.status == Status.OK or response.error_code in ("newer_frame", "shutting_down")
+
+
+def test_taken_ports_stop_start_up(server: LiveServer, settings_for: Callable[..., Settings]) -> None:
+    assert server.service is not None
+    with pytest.raises(RuntimeError, match="bind"):
+        LiveServer(settings_for(grpc_port=server.service.grpc_port)).start()
+    with pytest.raises(OSError, match="cannot listen for REST"):
+        LiveServer(settings_for(grpc_port=0, http_port=server.service.http_port)).start()
