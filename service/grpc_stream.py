@@ -23,6 +23,7 @@ Process = Callable[[pb.DetectRequest], Awaitable[pb.DetectResponse]]
 
 # Frames read but not yet sent back, per stream; beyond it the stream stops reading.
 MAX_UNANSWERED = 256
+_ANSWERED = pb.DetectRequest()
 
 
 @dataclass
@@ -72,6 +73,7 @@ class FrameStream:
 
     def _resolve(self, lane: _Lane, slot: _Slot, response: pb.DetectResponse) -> None:
         slot.response = response
+        slot.request = _ANSWERED  # the image bytes are not needed any more
         while lane.order and lane.order[0].response is not None:
             ready = lane.order.popleft().response
             assert ready is not None
@@ -85,7 +87,7 @@ class FrameStream:
 
     # ----- processing, one frame per lane at a time
 
-    async def _work(self, lane: _Lane, slot: _Slot) -> None:
+    async def _work(self, camera_id: str, lane: _Lane, slot: _Slot) -> None:
         current: _Slot | None = slot
         while current is not None:
             try:
@@ -98,6 +100,8 @@ class FrameStream:
                 self._drop(lane, current, "shutting_down", "the server is shutting down")
                 current = None
         lane.busy = False
+        if not lane.order and self._lanes.get(camera_id) is lane:
+            del self._lanes[camera_id]  # a stream may name many cameras over its life
 
     def _admit(self, request: pb.DetectRequest) -> None:
         lane = self._lanes.setdefault(request.camera_id, _Lane())
@@ -108,7 +112,7 @@ class FrameStream:
             return
         if not lane.busy:
             lane.busy = True
-            task = asyncio.create_task(self._work(lane, slot))
+            task = asyncio.create_task(self._work(request.camera_id, lane, slot))
             self._tasks.add(task)
             task.add_done_callback(self._tasks.discard)
             return

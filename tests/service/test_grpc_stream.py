@@ -78,6 +78,7 @@ def test_every_frame_is_answered_exactly_once() -> None:
         dropped = sum(a.status == Status.DROPPED for a in answers)
         assert stream.counts.received == 300 == stream.counts.answered + stream.counts.dropped
         assert dropped == stream.counts.dropped
+        assert stream._lanes == {}  # finished cameras leave no state behind
 
     asyncio.run(scenario())
 
