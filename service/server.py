@@ -90,7 +90,8 @@ class Service:
         )
         try:
             # Bound here so that a taken port is a clear OSError, not uvicorn's sys.exit.
-            sock = socket.create_server((settings.host, settings.http_port), reuse_port=False)
+            family = socket.AF_INET6 if ":" in settings.host else socket.AF_INET
+            sock = socket.create_server((settings.host, settings.http_port), family=family)
         except OSError as error:
             if self.grpc is not None:
                 await self.grpc.stop(grace_s=0)
