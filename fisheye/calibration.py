@@ -336,7 +336,7 @@ def fit_ruler_calibration(
     if not config.fit_principal_point and spread >= _MIN_DIRECTION_SPREAD:
         notes.append(
             "the rulers point in several directions: fitting the principal point from all marks "
-            "(fit_principal_point) spreads the error of the single nadir click over every mark"
+            "(--fit-principal-point) averages out the error of the single nadir click"
         )
     if constrained:
         notes.append(
