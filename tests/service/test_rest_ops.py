@@ -60,7 +60,9 @@ def test_openapi_documents_the_behaviour(live_server: LiveServer) -> None:
             "/v1/cameras/{camera_id}/detect", "/metrics"} <= set(paths)
     assert {"get", "put", "delete"} <= set(paths["/v1/cameras/{camera_id}"])
     detect = paths["/v1/cameras/{camera_id}/detect"]["post"]
-    assert set(detect["requestBody"]["content"]) == {"image/jpeg", "image/png", "multipart/form-data"}
+    assert set(detect["requestBody"]["content"]) == {
+        "image/jpeg", "image/png", "application/octet-stream", "multipart/form-data",
+    }
     assert {"200", "400", "404", "413", "415", "422", "503"} <= set(detect["responses"])
     assert set(detect["responses"]["200"]["content"]) == {"application/json", "image/jpeg"}
     assert {p["name"] for p in detect["parameters"]} == {"camera_id", "min_score", "frame_id", "render"}
