@@ -15,5 +15,6 @@ print(','.join(heavy))
 
 
 def test_service_imports_no_training_tools() -> None:
-    done = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, timeout=120, check=True)
+    done = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, timeout=120,
+                          check=True)
     assert done.stdout.strip() == ""
