@@ -18,7 +18,7 @@ ImageU8 = NDArray[np.uint8]
 @dataclass(frozen=True)
 class SensorSettings:
     """One frame's sensor: mean brightness `exposure` (of the tone-mapped image, 0-1), per-channel
-    `white_balance` gains, `vignetting` strength, `blur_px` (at 1024 px), shot/read noise
+    `white_balance` gains, `vignetting` strength, `blur_px` (Gaussian sigma at 1024 px), shot/read noise
     `noise` (linear units), `jpeg_quality`, `timestamp` text or None and its `timestamp_corner`."""
 
     exposure: float
@@ -47,7 +47,7 @@ def sample_sensor(rng: np.random.Generator, night: bool) -> SensorSettings:
         white_balance=(float(rng.normal(1, 0.05)), 1.0, float(rng.normal(1, 0.06))),
         vignetting=float(rng.uniform(0.1, 0.5)),
         blur_px=float(rng.uniform(0.3, 0.9)),
-        noise=float(rng.uniform(0.004, 0.012) if night else rng.uniform(0.0005, 0.004)),
+        noise=float(rng.uniform(0.003, 0.01) if night else rng.uniform(0.0002, 0.002)),
         jpeg_quality=int(rng.integers(70, 96)),
         timestamp=stamp,
         timestamp_corner=int(rng.choice([0, 0, 0, 1, 2, 3])),
@@ -59,33 +59,42 @@ def _luminance(image: Image32) -> Image32:
     return image @ np.array([0.2126, 0.7152, 0.0722], np.float32)
 
 
+_LUT_STEPS = 1024  # tone-curve entries per unit of linear brightness
+_LUT_RANGE = 4.0  # linear values above this clip to white
+
+
+def _tone_curve(contrast: float) -> NDArray[np.uint8]:
+    """uint8 output for linear inputs i / _LUT_STEPS: a filmic shoulder, sRGB-like gamma, and an
+    S-curve of strength `contrast`."""
+    x = np.arange(int(_LUT_RANGE * _LUT_STEPS) + 1, dtype=np.float64) / _LUT_STEPS
+    y = np.power(1.25 * x / (1.0 + 0.25 * x), 1 / 2.2)
+    y = np.clip(y, 0.0, 1.0)
+    y = y + contrast * (y - 0.5) * (1 - np.abs(2 * y - 1))
+    return np.clip(y * 255.0 + 0.5, 0, 255).astype(np.uint8)
+
+
 def develop(linear: Image32, grid: RayGrid, settings: SensorSettings, rng: np.random.Generator) -> ImageU8:
     """(H, W, 3) linear RGB radiance -> (H, W, 3) uint8 RGB as the camera would write it."""
-    height, width = grid.shape
-    scale = width / 1024.0
+    scale = grid.shape[1] / 1024.0
     theta_max = grid.camera.theta_max_rad
     falloff = 1.0 - settings.vignetting * (grid.theta / theta_max) ** 3
-    image = linear * falloff[..., None] * np.asarray(settings.white_balance, np.float32)
     # Auto exposure: scale the middle grey of the image circle to the target brightness.
-    lum = _luminance(image[::4, ::4])[grid.valid[::4, ::4]]
+    sub = (slice(None, None, 4), slice(None, None, 4))
+    lum = _luminance(linear[sub] * falloff[sub][..., None])[grid.valid[sub]]
     reference = float(np.percentile(lum, 60)) if lum.size else 1.0
-    target_linear = settings.exposure ** 2.2
-    image *= target_linear / max(reference, 1e-4)
-    sigma = settings.blur_px * scale
+    gain = settings.exposure ** 2.2 / max(reference, 1e-4)
+    # The image circle: dark beyond the lens's field, with a soft rim.
+    edge = cv2.GaussianBlur(grid.valid.astype(np.float32), (0, 0), max(0.6, 0.8 * scale))
+    pixel_gain = (falloff * edge * np.float32(gain)).astype(np.float32)
+    image = linear * pixel_gain[..., None] * np.asarray(settings.white_balance, np.float32)
+    # Lens blur grows slower than the frame: high-resolution sensors sit behind sharper lenses.
+    sigma = settings.blur_px * np.sqrt(scale)
     if sigma > 0.25:
         image = cv2.GaussianBlur(image, (0, 0), sigma)
     noise_std = np.sqrt(np.maximum(image, 0.0) * settings.noise + (settings.noise * 0.1) ** 2)
-    image = image + noise_std * rng.standard_normal(image.shape, dtype=np.float32)
-    # Filmic-ish tone curve: sRGB gamma with a soft shoulder, then an S-curve for contrast.
-    image = np.maximum(image, 0.0)
-    image = image / (1.0 + 0.25 * image)
-    image = np.power(image * 1.25, 1 / 2.2)
-    if settings.contrast > 0:
-        image = image + settings.contrast * (image - 0.5) * (1 - np.abs(2 * image - 1))
-    # The image circle: dark beyond the lens's field, with a soft rim.
-    edge = cv2.GaussianBlur(grid.valid.astype(np.float32), (0, 0), max(0.6, 0.8 * scale))
-    image *= edge[..., None]
-    out = np.clip(image * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    image += noise_std * rng.standard_normal(image.shape, dtype=np.float32)
+    index = np.clip(image * _LUT_STEPS, 0, _LUT_RANGE * _LUT_STEPS).astype(np.int32)
+    out = _tone_curve(settings.contrast)[index]
     if settings.timestamp:
         _stamp(out, settings.timestamp, settings.timestamp_corner)
     return out
