@@ -138,17 +138,46 @@ def _occluded(prims: list[Primitive], origins: FloatArray, direction: FloatArray
     return blocked
 
 
-def render(grid: RayGrid, background: Background, groups: list[Group], lighting: Lighting,
-           n_people: int) -> RenderOutput:
-    """Draw `groups` over the `background` of `grid`'s camera and light the result."""
+@dataclass(frozen=True)
+class Layer:
+    """Surfaces per pixel (H, W): distance `t`, `albedo` (H, W, 3), `normal` (H, W, 3),
+    `person_id`, and `drawn`: True where a group covers the background."""
+
+    t: Image32
+    albedo: Image32
+    normal: Image32
+    person_id: NDArray[np.int32]
+    drawn: NDArray[np.bool_]
+
+    @classmethod
+    def of_background(cls, background: Background) -> Layer:
+        shape = background.t.shape
+        return cls(background.t, background.albedo, background.normal,
+                   np.full(shape, NO_PERSON, np.int32), np.zeros(shape, bool))
+
+    def copy(self) -> Layer:
+        return Layer(self.t.copy(), self.albedo.copy(), self.normal.copy(), self.person_id.copy(),
+                     self.drawn.copy())
+
+
+@dataclass(frozen=True)
+class StaticScene:
+    """A scene's background with its fixed objects drawn, and the shadows those objects cast for
+    one light direction: what every frame of the scene shares."""
+
+    background: Background
+    layer: Layer
+    groups: list[Group]
+    bounds: list[tuple[FloatArray, FloatArray, float]]
+    light_direction: tuple[float, float, float]
+    shadow: Image32
+
+
+def _draw(grid: RayGrid, layer: Layer, groups: list[Group], bounds: list[tuple[FloatArray, FloatArray, float]],
+          unoccluded: NDArray[np.int64]) -> None:
+    """Draw `groups` into `layer` (in place) by the z-buffer; count each person's pixels alone."""
     cam = grid.camera
     origin = grid.origin
-    t_buf = background.t.copy()
-    albedo = background.albedo.copy()
-    normal = background.normal.copy()
-    person_id = np.full(grid.shape, NO_PERSON, np.int32)
-    unoccluded = np.zeros(n_people, np.int64)
-    bounds = [g.bound() for g in groups]
     for group, (a, b, radius) in zip(groups, bounds, strict=True):
         rect = capsule_region(cam, a, b, radius)
         if rect is None:
@@ -160,7 +189,7 @@ def render(grid: RayGrid, background: Background, groups: list[Group], lighting:
         hit = np.isfinite(t) & valid
         if group.person != NO_PERSON:
             unoccluded[group.person] = int(hit.sum())
-        region_t = t_buf[y0:y1, x0:x1].reshape(-1)
+        region_t = layer.t[y0:y1, x0:x1].reshape(-1)
         front = np.flatnonzero(hit & (t < region_t))
         if front.size == 0:
             continue
@@ -168,31 +197,67 @@ def render(grid: RayGrid, background: Background, groups: list[Group], lighting:
         rows, cols = np.divmod(front, x1 - x0)
         rows += y0
         cols += x0
-        t_buf[rows, cols] = t[front]
-        normal[rows, cols] = n[front]
-        albedo[rows, cols] = _albedo(group.primitives, which[front], points)
-        person_id[rows, cols] = group.person
+        layer.t[rows, cols] = t[front]
+        layer.normal[rows, cols] = n[front]
+        layer.albedo[rows, cols] = _albedo(group.primitives, which[front], points)
+        layer.person_id[rows, cols] = group.person
+        layer.drawn[rows, cols] = True
+
+
+def render_static(grid: RayGrid, background: Background, groups: list[Group],
+                  light_direction: tuple[float, float, float]) -> StaticScene:
+    """Draw a scene's fixed objects once, with their shadows for `light_direction`."""
+    layer = Layer.of_background(background).copy()
+    bounds = [g.bound() for g in groups]
+    _draw(grid, layer, groups, bounds, np.zeros(0, np.int64))
+    light = np.asarray(light_direction, dtype=np.float64)
+    shadow = _shadows(grid, layer.t, layer.normal, groups, bounds, light, None)
+    return StaticScene(background, layer, groups, bounds, light_direction, shadow)
+
+
+def render(grid: RayGrid, static: StaticScene, groups: list[Group], lighting: Lighting,
+           n_people: int) -> RenderOutput:
+    """Draw `groups` (people and other per-frame things) over a scene's static layer and light
+    the result; `lighting.direction` must be the static scene's light direction."""
+    if tuple(lighting.direction) != tuple(static.light_direction):
+        raise ValueError("the lighting's direction differs from the static scene's")
+    layer = static.layer.copy()
+    unoccluded = np.zeros(n_people, np.int64)
+    bounds = [g.bound() for g in groups]
+    _draw(grid, layer, groups, bounds, unoccluded)
     light_dir = np.asarray(lighting.direction, dtype=np.float64)
-    shadow = _shadows(grid, t_buf, normal, groups, bounds, light_dir)
+    # Static shadows hold where the static surfaces still show; new surfaces are tested afresh.
+    new = layer.drawn & ~static.layer.drawn | (layer.t < static.layer.t)
+    shadow = static.shadow.copy()
+    shadow[new] = 1.0
+    if new.any():
+        shadow = np.minimum(shadow, _shadows(grid, layer.t, layer.normal, static.groups, static.bounds,
+                                             light_dir, new))
+    if groups:
+        shadow = np.minimum(shadow, _shadows(grid, layer.t, layer.normal, groups, bounds, light_dir, None))
     if lighting.shadow_softness > 0:
         shadow = np.asarray(cv2.GaussianBlur(shadow, (0, 0), lighting.shadow_softness), np.float32)
+    normal, albedo = layer.normal, layer.albedo
     lambert = np.clip(normal @ light_dir.astype(np.float32), 0.0, 1.0)
     hemi = 0.75 + 0.25 * normal[..., 2]
     ambient = np.asarray(lighting.ambient, np.float32)
     sun = np.asarray(lighting.color, np.float32)
     light = ambient * hemi[..., None] + sun * (lambert * shadow)[..., None]
     image = albedo * light
-    sky = background.kind == SKY
+    kind = static.background.kind
+    sky = (kind == SKY) & ~layer.drawn
     image[sky] = albedo[sky] * lighting.sky_gain
-    ceiling = (background.kind == CEILING) & (person_id == NO_PERSON)
+    ceiling = (kind == CEILING) & ~layer.drawn
     image[ceiling] = albedo[ceiling] * ambient.mean()
     image[~grid.valid] = 0.0
-    return RenderOutput(image=image, person_id=person_id, unoccluded_px=unoccluded)
+    return RenderOutput(image=image, person_id=layer.person_id, unoccluded_px=unoccluded)
 
 
 def _shadows(grid: RayGrid, t_buf: Image32, normal: Image32, groups: list[Group],
-             bounds: list[tuple[FloatArray, FloatArray, float]], light_dir: FloatArray) -> Image32:
-    """(H, W) float32: 0 where the light is blocked by a group, else 1.
+             bounds: list[tuple[FloatArray, FloatArray, float]], light_dir: FloatArray,
+             only: NDArray[np.bool_] | None) -> Image32:
+    """(H, W) float32: 0 where the light is blocked by a group, else 1 (pixels outside `only`,
+    when given, are not tested and stay 1).
 
     Shadow rays are cast from every `SHADOW_STEP`-th pixel only and the mask is scaled up: shadow
     edges are blurred afterwards anyway, and this is the most expensive pass."""
@@ -200,6 +265,7 @@ def _shadows(grid: RayGrid, t_buf: Image32, normal: Image32, groups: list[Group]
     origin = grid.origin
     step = SHADOW_STEP if min(grid.shape) >= 384 else 1
     t_sub = t_buf[::step, ::step]
+    only_sub = None if only is None else only[::step, ::step]
     normal_sub = normal[::step, ::step]
     rays_sub = grid.directions[::step, ::step]
     shadow = np.ones(t_sub.shape, np.float32)
@@ -215,7 +281,10 @@ def _shadows(grid: RayGrid, t_buf: Image32, normal: Image32, groups: list[Group]
         x0, y0 = rect[0] // step, rect[1] // step
         x1, y1 = -(-rect[2] // step), -(-rect[3] // step)
         t = t_sub[y0:y1, x0:x1].reshape(-1)
-        finite = np.flatnonzero(np.isfinite(t))
+        usable = np.isfinite(t)
+        if only_sub is not None:
+            usable &= only_sub[y0:y1, x0:x1].reshape(-1)
+        finite = np.flatnonzero(usable)
         if finite.size == 0:
             continue
         rays = rays_sub[y0:y1, x0:x1].reshape(-1, 3)[finite].astype(np.float64)

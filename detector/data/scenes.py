@@ -357,7 +357,7 @@ def build_scene(split: str, index: int, kind: str | None = None,
     styles = INDOOR_STYLES if kind == "indoor" else OUTDOOR_STYLES
     drawn_style = str(styles[int(rng.integers(len(styles)))])
     style = style or drawn_style
-    scene_id = f"{kind}-{split[0]}{index:04d}"
+    scene_id = f"{kind}-{style}-{split[0]}{index:04d}"
     cam = camera if camera is not None else sample_camera(rng, f"synth-{split[0]}{index:04d}",
                                                           kind == "outdoor", style == "hall")
     if kind == "indoor":

@@ -59,6 +59,22 @@ def _luminance(image: Image32) -> Image32:
     return image @ np.array([0.2126, 0.7152, 0.0722], np.float32)
 
 
+_NOISE_BANK_SIZE = 1 << 22
+_noise_bank: list[Image32] = []
+
+
+def _normal_noise(rng: np.random.Generator, shape: tuple[int, ...]) -> Image32:
+    """Standard normal float32 noise of `shape`: a random window of a fixed bank of normals when
+    it fits (drawing millions of fresh normals per frame costs more than the rest of the sensor)."""
+    count = int(np.prod(shape))
+    if count > _NOISE_BANK_SIZE:
+        return rng.standard_normal(shape, dtype=np.float32)
+    if not _noise_bank:
+        _noise_bank.append(np.random.default_rng(2024).standard_normal(_NOISE_BANK_SIZE, dtype=np.float32))
+    start = int(rng.integers(0, _NOISE_BANK_SIZE - count + 1))
+    return _noise_bank[0][start:start + count].reshape(shape)
+
+
 _LUT_STEPS = 1024  # tone-curve entries per unit of linear brightness
 _LUT_RANGE = 4.0  # linear values above this clip to white
 
@@ -90,9 +106,9 @@ def develop(linear: Image32, grid: RayGrid, settings: SensorSettings, rng: np.ra
     # Lens blur grows slower than the frame: high-resolution sensors sit behind sharper lenses.
     sigma = settings.blur_px * np.sqrt(scale)
     if sigma > 0.25:
-        image = cv2.GaussianBlur(image, (0, 0), sigma)
+        image = np.asarray(cv2.GaussianBlur(image, (0, 0), sigma), np.float32)
     noise_std = np.sqrt(np.maximum(image, 0.0) * settings.noise + (settings.noise * 0.1) ** 2)
-    image += noise_std * rng.standard_normal(image.shape, dtype=np.float32)
+    image += noise_std * _normal_noise(rng, image.shape)
     index = np.clip(image * _LUT_STEPS, 0, _LUT_RANGE * _LUT_STEPS).astype(np.int32)
     out = _tone_curve(settings.contrast)[index]
     if settings.timestamp:

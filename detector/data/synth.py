@@ -8,6 +8,7 @@ only), so data sets made with different seeds share the split's scenes but not t
 
 from __future__ import annotations
 
+import zlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -19,7 +20,7 @@ from detector.data.environment import Background, trace_environment
 from detector.data.ground_truth import PersonTruth, people_truth
 from detector.data.palettes import SPLITS
 from detector.data.rays import ray_grid
-from detector.data.render import Group, Lighting, render
+from detector.data.render import Group, Lighting, StaticScene, render, render_static
 from detector.data.scenes import Scene, build_scene
 from detector.data.sensor import develop, encode_jpeg, sample_sensor
 from fisheye import FisheyeCamera
@@ -62,6 +63,7 @@ class SynthFrame:
 
 _scene_cache: dict[tuple[str, int, str, str], Scene] = {}
 _background_cache: dict[tuple[str, int], Background] = {}
+_static_cache: dict[tuple[str, int, bool], StaticScene] = {}
 
 
 def _style(config: SynthConfig, scene_index: int) -> str | None:
@@ -77,34 +79,43 @@ def _scene(split: str, scene_index: int, config: SynthConfig) -> Scene:
     if key not in _scene_cache:
         _scene_cache.clear()
         _background_cache.clear()
+        _static_cache.clear()
         _scene_cache[key] = build_scene(split, scene_index, config.kind, config.camera,
                                                  _style(config, scene_index))
     return _scene_cache[key]
 
 
+def light_direction(scene: Scene, night: bool) -> tuple[float, float, float]:
+    """The scene's light direction (unit vector towards the light) by day or by night: fixed per
+    scene, so its static objects' shadows are cast once."""
+    rng = np.random.default_rng([zlib.crc32(scene.scene_id.encode()), int(night)])
+    if scene.kind == "outdoor" and not night:
+        elevation = rng.uniform(np.radians(25), np.radians(80))
+    else:
+        elevation = rng.uniform(np.radians(60), np.radians(89))
+    azimuth = rng.uniform(0, 2 * np.pi)
+    direction = np.array([np.cos(azimuth) * np.cos(elevation), np.sin(azimuth) * np.cos(elevation),
+                          np.sin(elevation)])
+    return float(direction[0]), float(direction[1]), float(direction[2])
+
+
 def sample_lighting(rng: np.random.Generator, scene: Scene, night: bool) -> Lighting:
     """Sun or ceiling light, ambient and shadow softness for one frame."""
     if scene.kind == "outdoor" and not night:
-        elevation = rng.uniform(np.radians(25), np.radians(80))
         sun = rng.uniform(2.0, 3.5) * np.array([1.0, 0.96, 0.88])
         ambient = rng.uniform(0.5, 0.9) * np.array([0.8, 0.9, 1.1])
         softness = rng.uniform(0.5, 1.5)
     elif scene.kind == "outdoor":
-        elevation = rng.uniform(np.radians(60), np.radians(88))
         sun = rng.uniform(0.6, 1.2) * np.array([1.0, 0.75, 0.45])
         ambient = rng.uniform(0.15, 0.35) * np.array([0.9, 0.85, 0.9])
         softness = rng.uniform(2.0, 5.0)
     else:
-        elevation = rng.uniform(np.radians(60), np.radians(89))
         warm = rng.uniform(0.0, 0.2) + (0.25 if night else 0.0)
         sun = rng.uniform(0.3, 0.8) * np.array([1.0, 1.0 - warm * 0.5, 1.0 - warm])
         ambient = rng.uniform(0.6, 1.0) * np.array([1.0, 1.0 - warm * 0.4, 1.0 - warm * 0.8])
         softness = rng.uniform(2.0, 6.0)
-    azimuth = rng.uniform(0, 2 * np.pi)
-    direction = np.array([np.cos(azimuth) * np.cos(elevation), np.sin(azimuth) * np.cos(elevation),
-                          np.sin(elevation)])
     return Lighting(
-        direction=(float(direction[0]), float(direction[1]), float(direction[2])),
+        direction=light_direction(scene, night),
         color=(float(sun[0]), float(sun[1]), float(sun[2])),
         ambient=(float(ambient[0]), float(ambient[1]), float(ambient[2])),
         shadow_softness=float(softness),
@@ -137,11 +148,15 @@ def render_frame_with_ids(seed: int, split: str, index: int, config: SynthConfig
         count = int(rng.integers(config.people[0], config.people[1] + 1))
     specs, extra = place_people(rng, scene, count)
     people = [build_person(spec) for spec in specs]
-    groups = [Group(o.primitives) for o in scene.objects + extra]
+    groups = [Group(o.primitives) for o in extra]
     groups += [Group(p.primitives, person=i) for i, p in enumerate(people)]
     night = bool(rng.random() < 0.2)
     lighting = sample_lighting(rng, scene, night)
-    output = render(grid, background, groups, lighting, len(people))
+    static_key = (scene.scene_id, config.size, night)
+    if static_key not in _static_cache:
+        _static_cache[static_key] = render_static(grid, background, [Group(o.primitives) for o in scene.objects],
+                                                  lighting.direction)
+    output = render(grid, _static_cache[static_key], groups, lighting, len(people))
     locations = np.array([p.location_m for p in people]).reshape(-1, 2)
     truths = people_truth(output.person_id, output.unoccluded_px, locations, camera.principal_point,
                           config.min_visible_fraction, config.min_visible_px)
