@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.data.primitives import (
+    PATTERN_BOOKS,
     PATTERN_GRAIN,
     PATTERN_STRIPES,
     Material,
@@ -189,6 +190,12 @@ def tree(x: float, y: float, height: float, crown: float, bark: Material, leaves
 def bin_(x: float, y: float, body: Material) -> Placed:
     prim = make_cylinder(np.array([x, y, 0.0]), np.array([x, y, 0.9]), 0.25, body)
     return Placed([prim], (x, y, 0.35))
+
+
+def books(color: FloatArray, other: FloatArray, shelf_m: float) -> Material:
+    """Rows of book spines of mixed colours on shelves `shelf_m` apart."""
+    return Material((float(color[0]), float(color[1]), float(color[2])), PATTERN_BOOKS,
+                    (float(other[0]), float(other[1]), float(other[2])), shelf_m)
 
 
 def striped(color: FloatArray, stripe: FloatArray, period_m: float) -> Material:

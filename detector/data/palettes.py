@@ -22,7 +22,7 @@ _UNSEEN_EVERY = 3  # presets with index % 3 == 2 are unseen, the rest seen
 # kind -> (hue range, saturation range, value range) in HSV of sRGB
 _RANGES: dict[str, tuple[tuple[float, float], tuple[float, float], tuple[float, float]]] = {
     "tiles": ((0.0, 1.0), (0.0, 0.25), (0.45, 0.92)),
-    "carpet": ((0.0, 1.0), (0.05, 0.45), (0.2, 0.6)),
+    "carpet": ((0.0, 1.0), (0.03, 0.3), (0.2, 0.6)),
     "wood": ((0.05, 0.1), (0.35, 0.7), (0.3, 0.75)),
     "asphalt": ((0.55, 0.65), (0.0, 0.08), (0.18, 0.42)),
     "paving": ((0.0, 0.12), (0.0, 0.35), (0.4, 0.8)),

@@ -17,13 +17,14 @@ FloatArray = NDArray[np.float64]
 
 T_MIN = 1e-4  # hits nearer than this along the ray are ignored (shadow-ray self hits)
 
-PATTERN_PLAIN, PATTERN_STRIPES, PATTERN_CHECKS, PATTERN_GRAIN = 0, 1, 2, 3
+PATTERN_PLAIN, PATTERN_STRIPES, PATTERN_CHECKS, PATTERN_GRAIN, PATTERN_BOOKS = 0, 1, 2, 3, 4
 
 
 @dataclass(frozen=True)
 class Material:
     """Albedo `color` (3,) linear RGB in [0, 1], an optional pattern in the primitive's local frame
-    (`pattern`: plain, stripes, checks or grain, in `pattern_color` with period `period_m`)."""
+    (`pattern`: plain, stripes, checks, grain, or books on shelves `period_m` apart, in
+    `pattern_color` with period `period_m`)."""
 
     color: tuple[float, float, float]
     pattern: int = PATTERN_PLAIN

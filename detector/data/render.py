@@ -15,7 +15,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.data.environment import CEILING, SKY, Background
-from detector.data.primitives import PATTERN_CHECKS, PATTERN_GRAIN, PATTERN_STRIPES, Primitive
+from detector.data.primitives import (
+    PATTERN_BOOKS,
+    PATTERN_CHECKS,
+    PATTERN_GRAIN,
+    PATTERN_STRIPES,
+    Primitive,
+)
 from detector.data.rays import RayGrid, capsule_region
 
 FloatArray = NDArray[np.float64]
@@ -81,6 +87,12 @@ def _pattern(prim: Primitive, points: FloatArray) -> FloatArray:
         return ((np.floor(q[:, 2]) + np.floor(ring)) % 2).astype(np.float64)[:, None]
     if mat.pattern == PATTERN_GRAIN:
         return 0.35 * (0.5 + 0.5 * np.sin(q[:, 0] * 6.0 + 2.0 * np.sin(q[:, 1] * 3.0)))[:, None]
+    if mat.pattern == PATTERN_BOOKS:
+        # Spines 2-4 cm wide along the shelf, each its own mix of the two colours; dark shelf boards.
+        spine = np.floor((q[:, 0] + q[:, 1]) * mat.period_m / 0.03)
+        mix = np.mod(np.sin(spine * 12.9898 + np.floor(q[:, 2]) * 78.233) * 43758.5453, 1.0)
+        board = np.mod(q[:, 2], 1.0) > 0.88
+        return np.where(board, 0.0, mix)[:, None]
     return np.zeros((len(points), 1))
 
 
@@ -94,6 +106,8 @@ def _albedo(prims: list[Primitive], which: NDArray[np.intp], points: FloatArray)
         if mat.pattern:
             mix = _pattern(prim, points[sel])
             out[sel] = color * (1 - mix) + np.asarray(mat.pattern_color) * mix
+            if mat.pattern == PATTERN_BOOKS:
+                out[sel] *= 0.5 + 0.8 * np.abs(np.sin(mix * 91.7))
         else:
             out[sel] = color
     return out

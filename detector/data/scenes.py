@@ -185,8 +185,8 @@ def _indoor(rng: np.random.Generator, split: str, style: str, altitude: float
     elif style == "library":
         split_x = x0 + (x1 - x0) * rng.uniform(0.35, 0.65)
         spacing_s = rng.uniform(1.8, 2.8)
-        books = obj.striped(scene_color("furniture", split, rng) * 0.6, scene_color("rug", split, rng) * 0.7,
-                            rng.uniform(0.25, 0.4))
+        books = obj.books(scene_color("rug", split, rng), scene_color("furniture", split, rng),
+                          rng.uniform(0.28, 0.4))
         for sy in np.arange(y0 + 1.5, y1 - 1.0, spacing_s):
             items.append(obj.shelf(float((x0 + split_x) / 2), float(sy), 0.0, (split_x - x0) * 0.8, 0.45,
                                    rng.uniform(1.2, 2.1), mat(wood), books))
