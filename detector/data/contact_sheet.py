@@ -40,13 +40,13 @@ def draw_truth(frame_bgr: ImageU8, image: dict[str, Any], annotations: list[dict
         pts = ((quad + 0.5) * scale - 0.5).round().astype(np.int32)
         cv2.polylines(canvas, [pts], True, color, thickness, cv2.LINE_AA)
         fx, fy = (foot + 0.5) * scale - 0.5
-        cv2.circle(canvas, (int(round(fx)), int(round(fy))), 2 + thickness, (0, 0, 255), -1, cv2.LINE_AA)
+        cv2.circle(canvas, (round(fx), round(fy)), 2 + thickness, (0, 0, 255), -1, cv2.LINE_AA)
     if camera is not None:
         located = np.array([a["location_m"] for a in annotations], dtype=np.float64)
         uv = camera.scaled_to((width, height)).floor_to_pixels(located)
         for u, v in uv:
             if np.isfinite(u) and np.isfinite(v):
-                center = (int(round((u + 0.5) * scale - 0.5)), int(round((v + 0.5) * scale - 0.5)))
+                center = (round((u + 0.5) * scale - 0.5), round((v + 0.5) * scale - 0.5))
                 cv2.circle(canvas, center, 4 + thickness, (255, 255, 0), thickness, cv2.LINE_AA)
     return canvas
 

@@ -65,7 +65,8 @@ def _clothes(rng: np.random.Generator) -> dict[str, Material | bool | str]:
 def _person(rng: np.random.Generator, x: float, y: float, heading: float, pose: str) -> PersonSpec:
     carried = "none"
     if pose != "sitting":
-        carried = str(rng.choice(["none", "bag", "backpack", "box", "phone"], p=[0.55, 0.12, 0.15, 0.05, 0.13]))
+        carried = str(rng.choice(["none", "bag", "backpack", "box", "phone"],
+                                 p=[0.55, 0.12, 0.15, 0.05, 0.13]))
     clothes = _clothes(rng)
     return PersonSpec(
         position_m=(x, y),

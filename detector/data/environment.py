@@ -25,8 +25,9 @@ FLOOR, WALL, CEILING, SKY = 1, 2, 3, 4
 class Environment:
     """Enclosure `room_m` (x0, y0, x1, y1) around the nadir with walls `wall_height_m` high; above
     them a ceiling (indoor) or sky. The floor mixes `floor` and `floor_second` by the overlay's 5th
-    channel, is tinted by its RGB and blended towards that colour by its 4th (markings, rugs). `walls` is a texture in
-    (s, z) metres where s runs round the enclosure from (x0, y0) counter-clockwise."""
+    channel, is tinted by its RGB and blended towards that colour by its 4th (markings, rugs).
+    `walls` is a texture in (s, z) metres where s runs round the enclosure from (x0, y0)
+    counter-clockwise."""
 
     indoor: bool
     room_m: tuple[float, float, float, float]

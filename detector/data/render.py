@@ -96,6 +96,17 @@ def _pattern(prim: Primitive, points: FloatArray) -> FloatArray:
     return np.zeros((len(points), 1))
 
 
+_GRAIN_M = 0.012  # cell size of the surface grain (fabric weave, paint, wear)
+_GRAIN = 0.08  # its strength
+
+
+def _grain(points: FloatArray) -> FloatArray:
+    """(N, 3) world points -> (N, 1) factors around 1 from a hash of their grain cell."""
+    cell = np.floor(points / _GRAIN_M)
+    value = np.mod(np.sin(cell @ np.array([12.9898, 78.233, 37.719])) * 43758.5453, 1.0)
+    return (1.0 + _GRAIN * (2.0 * value - 1.0))[:, None]
+
+
 def _albedo(prims: list[Primitive], which: NDArray[np.intp], points: FloatArray) -> FloatArray:
     out = np.zeros((len(which), 3))
     for k in np.unique(which):
@@ -110,7 +121,7 @@ def _albedo(prims: list[Primitive], which: NDArray[np.intp], points: FloatArray)
                 out[sel] *= 0.5 + 0.8 * np.abs(np.sin(mix * 91.7))
         else:
             out[sel] = color
-    return out
+    return out * _grain(points)
 
 
 def _cast(prims: list[Primitive], origin: FloatArray, rays: FloatArray
@@ -187,8 +198,8 @@ class StaticScene:
     shadow: Image32
 
 
-def _draw(grid: RayGrid, layer: Layer, groups: list[Group], bounds: list[tuple[FloatArray, FloatArray, float]],
-          unoccluded: NDArray[np.int64]) -> None:
+def _draw(grid: RayGrid, layer: Layer, groups: list[Group],
+          bounds: list[tuple[FloatArray, FloatArray, float]], unoccluded: NDArray[np.int64]) -> None:
     """Draw `groups` into `layer` (in place) by the z-buffer; count each person's pixels alone."""
     cam = grid.camera
     origin = grid.origin

@@ -104,7 +104,8 @@ def _table_set(rng: np.random.Generator, x: float, y: float, yaw: float, length:
     desk = obj.table(x, y, yaw, length, depth, height, top, legs)
     # Clutter on the table: papers, laptops, bags.
     for _ in range(rng.integers(0, 2 + int(length))):
-        lx, ly = rng.uniform(-length / 2 + 0.2, length / 2 - 0.2), rng.uniform(-depth / 2 + 0.15, depth / 2 - 0.15)
+        lx = rng.uniform(-length / 2 + 0.2, length / 2 - 0.2)
+        ly = rng.uniform(-depth / 2 + 0.15, depth / 2 - 0.15)
         r = rng.random()
         size = (np.array([0.15, 0.11, 0.003]) if r < 0.5 else np.array([0.17, 0.12, 0.012]) if r < 0.8
                 else np.array([0.18, 0.1, 0.12]))
@@ -224,7 +225,8 @@ def _indoor(rng: np.random.Generator, split: str, style: str, altitude: float
                                    float(rng.uniform(0, 2 * np.pi)), rng.uniform(1.2, 2.5),
                                    mat(wood), legs))
     for _ in range(rng.integers(0, 4)):
-        items.append(obj.plant(float(rng.choice([x0 + 0.4, x1 - 0.4])), float(rng.uniform(y0 + 0.5, y1 - 0.5)),
+        px, py = float(rng.choice([x0 + 0.4, x1 - 0.4])), float(rng.uniform(y0 + 0.5, y1 - 0.5))
+        items.append(obj.plant(px, py,
                                mat(scene_color("furniture", split, rng)),
                                mat(scene_color("foliage", split, rng)), rng.uniform(0.7, 1.6)))
     return env, items, (x0 + 0.3, y0 + 0.3, x1 - 0.3, y1 - 0.3)
@@ -259,11 +261,13 @@ def _outdoor(rng: np.random.Generator, split: str, style: str
             paint_stripe(canvas, np.array([x, offset]), np.array([x + dash, offset]), 0.12, white)
         cross = rng.uniform(-10, 10)
         for y in np.arange(offset - road + 0.3, offset + road - 0.3, 0.9):
-            paint_stripe(canvas, np.array([cross - 2, y + 0.25]), np.array([cross + 2, y + 0.25]), 0.45, white)
+            paint_stripe(canvas, np.array([cross - 2, y + 0.25]), np.array([cross + 2, y + 0.25]), 0.45,
+                         white)
         for x in np.arange(room[0] + 5, room[2] - 5, rng.uniform(5, 9)):
             if abs(x - cross) > 4 and rng.random() < 0.5:
                 side = rng.choice([-1, 1])
-                items.append(obj.car(float(x), float(offset + side * (road - 1.2)), float(rng.choice([0, np.pi])),
+                yaw = float(rng.choice([0, np.pi]))
+                items.append(obj.car(float(x), float(offset + side * (road - 1.2)), yaw,
                                      cars[rng.integers(4)], glass, tyre))
         for x in np.arange(room[0] + 3, room[2] - 3, rng.uniform(8, 20)):
             side = rng.choice([-1, 1])
@@ -293,7 +297,8 @@ def _outdoor(rng: np.random.Generator, split: str, style: str
                     continue
                 if pick < 0.4:
                     items.append(obj.bench(float(x), float(y), float(rng.uniform(0, 2 * np.pi)),
-                                           rng.uniform(1.5, 2.5), mat(scene_color("wood", split, rng)), metal))
+                                           rng.uniform(1.5, 2.5), mat(scene_color("wood", split, rng)),
+                                           metal))
                 elif pick < 0.7:
                     items.append(obj.tree(float(x), float(y), rng.uniform(4, 8), rng.uniform(1.5, 3), bark,
                                           leaves, rng))
@@ -314,8 +319,8 @@ def _outdoor(rng: np.random.Generator, split: str, style: str
                         cy = ry + bay_l * (half_row + 0.5)
                         cx = bx + bay_w / 2
                         if rng.random() < 0.65 and np.hypot(cx, cy) > 3.0:
-                            items.append(obj.car(float(cx), float(cy),
-                                                 float(np.pi / 2 + rng.choice([0, np.pi]) + rng.normal(0, 0.04)),
+                            yaw = float(np.pi / 2 + rng.choice([0, np.pi]) + rng.normal(0, 0.04))
+                            items.append(obj.car(float(cx), float(cy), yaw,
                                                  cars[rng.integers(4)], glass, tyre))
             for _ in range(rng.integers(0, 5)):
                 x, y = rng.uniform(room[0] + 2, room[2] - 2), rng.uniform(room[1] + 2, room[3] - 2)

@@ -121,7 +121,7 @@ def _stamp(image: ImageU8, text: str, corner: int) -> None:
     height, width = image.shape[:2]
     font = cv2.FONT_HERSHEY_SIMPLEX
     scale = width / 900.0
-    thickness = max(1, int(round(width / 700)))
+    thickness = max(1, round(width / 700))
     (tw, th), _ = cv2.getTextSize(text, font, scale, thickness)
     margin = int(width * 0.01)
     x = margin if corner in (0, 2) else width - tw - margin

@@ -30,8 +30,7 @@ class Canvas:
         self.image[:] = np.asarray(fill, np.float32)
 
     def _px(self, x: float, y: float) -> tuple[int, int]:
-        return (int(round((x - self.origin[0]) / self.texel_m)),
-                int(round((y - self.origin[1]) / self.texel_m)))
+        return (round((x - self.origin[0]) / self.texel_m), round((y - self.origin[1]) / self.texel_m))
 
     def rect(self, x0: float, y0: float, x1: float, y1: float, value: FloatArray,
              channels: slice = slice(None)) -> None:

@@ -154,8 +154,8 @@ def render_frame_with_ids(seed: int, split: str, index: int, config: SynthConfig
     lighting = sample_lighting(rng, scene, night)
     static_key = (scene.scene_id, config.size, night)
     if static_key not in _static_cache:
-        _static_cache[static_key] = render_static(grid, background, [Group(o.primitives) for o in scene.objects],
-                                                  lighting.direction)
+        fixed = [Group(o.primitives) for o in scene.objects]
+        _static_cache[static_key] = render_static(grid, background, fixed, lighting.direction)
     output = render(grid, _static_cache[static_key], groups, lighting, len(people))
     locations = np.array([p.location_m for p in people]).reshape(-1, 2)
     truths = people_truth(output.person_id, output.unoccluded_px, locations, camera.principal_point,

@@ -68,7 +68,6 @@ class Texture:
               wrap: bool = True) -> Texture:
         levels = [np.ascontiguousarray(image, dtype=np.float32)]
         while min(levels[-1].shape[:2]) > 2 and len(levels) < 10:
-            h, w = levels[-1].shape[:2]
             levels.append(_half(levels[-1]))
         return cls(tuple(levels), texel_m, origin_m, wrap)
 

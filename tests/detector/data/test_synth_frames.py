@@ -53,7 +53,7 @@ def test_silhouette_lies_inside_its_radius_aligned_box(name: str, index: int) ->
         pixels = np.stack([cols, rows], axis=1) - box[:2]
         assert np.all(np.abs(pixels @ radial) <= box[3] / 2 + 1e-6)
         assert np.all(np.abs(pixels @ tangential) <= box[2] / 2 + 1e-6)
-        x, y, w, h = person.bbox
+        x, y, _, h = person.bbox
         assert cols.min() - 0.5 == pytest.approx(x) and rows.max() + 0.5 == pytest.approx(y + h)
         assert 0 < person.visible_fraction <= 1
 

@@ -38,7 +38,8 @@ def test_annotations_follow_the_dataset_format(tmp_path: Path) -> None:
     for image in document["images"]:
         assert set(image) == IMAGE_KEYS
         assert (tmp_path / image["file_name"]).is_file()
-        assert image["split"] == "unseen" and image["scene_id"].startswith("indoor-") and image["scene_id"][-5] == "u"
+        assert image["split"] == "unseen"
+        assert image["scene_id"].startswith("indoor-") and image["scene_id"][-5] == "u"
         camera = camera_from_dict(image["camera"])
         assert tuple(camera.image_size) == (image["width"], image["height"]) == (256, 256)
     ids = [a["id"] for a in document["annotations"]]
