@@ -399,5 +399,7 @@ def build_scene(split: str, index: int, kind: str | None = None,
     else:
         env, items, walk = _outdoor(rng, split, style)
     # Nothing solid may stand where the lens is (pole cameras sit above the pole's foot).
-    items = [o for o in items if np.hypot(o.footprint[0], o.footprint[1]) > o.footprint[2] + 0.3]
+    lens = np.array([0.0, 0.0, cam.altitude_m])
+    items = [o for o in items if np.hypot(o.footprint[0], o.footprint[1]) > o.footprint[2] + 0.3
+             and all(np.linalg.norm(p.center - lens) > p.radius_m + 0.1 for p in o.primitives)]
     return Scene(scene_id, split, kind, style, cam, env, items, walk)
