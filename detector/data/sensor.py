@@ -114,7 +114,11 @@ def develop(linear: Image32, grid: RayGrid, settings: SensorSettings, rng: np.ra
     if sigma > 0.25:
         image = np.asarray(cv2.GaussianBlur(image, (0, 0), sigma), np.float32)
     if settings.local_contrast > 0:
-        halo = cv2.GaussianBlur(image, (0, 0), 12.0 * scale)
+        # The wide blur is taken at a quarter of the size: it only holds low frequencies.
+        height, width = grid.shape
+        small = cv2.resize(image, (max(1, width // 4), max(1, height // 4)), interpolation=cv2.INTER_AREA)
+        small = cv2.GaussianBlur(small, (0, 0), 3.0 * scale)
+        halo = cv2.resize(small, (width, height), interpolation=cv2.INTER_LINEAR)
         image = np.maximum(image + settings.local_contrast * (image - halo), 0.0).astype(np.float32)
     if settings.chromatic_px > 0:
         image = _lateral_colour(image, grid, settings.chromatic_px * scale)
