@@ -15,6 +15,9 @@ from collections.abc import Sequence
 # name -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "calibrate": ("fisheye.calibrate_cli", "fit a camera's lens from ruler marks, or import OpenCV K/D"),
+    "export": ("exporter.export", "turn a training checkpoint into a verified ONNX model (optional INT8)"),
+    "train": ("detector.train", "train the person detector on annotated fisheye frames"),
+    "eval": ("detector.evaluate", "evaluate a checkpoint or ONNX model: mAP, AP by distance, PE in metres"),
 }
 
 # Modules that only the training extra installs.
