@@ -13,6 +13,8 @@ import sys
 from dataclasses import asdict, replace
 from pathlib import Path
 
+import torch
+
 from detector.checkpoint import CheckpointError, load_checkpoint
 from detector.data.dataset import AugmentConfig
 from detector.data.readers import DatasetFormatError, read_dataset
@@ -24,7 +26,8 @@ MODEL_SIZES = {"default": DetectorConfig, "tiny": tiny_config}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--data", required=True, help="training annotations.json")
+    parser.add_argument("--data", required=True, nargs="+",
+                        help="training annotations.json (several files are concatenated)")
     parser.add_argument("--val", default=None, help="validation annotations.json (metrics each epoch)")
     parser.add_argument("--out", required=True, help="run folder: checkpoints, log.jsonl, training.png")
     parser.add_argument("--init", default=None, help="start from this checkpoint's weights (fine-tune)")
@@ -41,13 +44,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--val-limit", type=int, default=200, help="validate on the first N frames")
     parser.add_argument("--device", default="auto", help="auto (CUDA when present), cpu, cuda, ...")
+    parser.add_argument("--threads", type=int, default=None,
+                        help="torch intra-op threads (on a busy CPU, 1 is often fastest)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
 def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
+    if args.threads is not None:
+        torch.set_num_threads(args.threads)
     try:
-        train_frames = read_dataset(args.data)
+        train_frames = [frame for path in args.data for frame in read_dataset(path)]
         val_frames = read_dataset(args.val) if args.val else None
         model_config = load_checkpoint(args.init).config if args.init else MODEL_SIZES[args.model_size]()
         if args.input_size is not None:
@@ -60,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
         augment=AugmentConfig(rotation=args.rotation_aug, flip=not args.no_flip),
         loss=LossConfig(equivariance=args.equivariance), val_limit=args.val_limit, device=args.device,
     )
-    trained_on = f"{Path(args.data).parent.name or args.data} ({len(train_frames)} frames)"
+    names = ", ".join(Path(path).parent.name or str(path) for path in args.data)
+    trained_on = f"{names} ({len(train_frames)} frames)"
     trainer = Trainer(model_config, config, out, train_frames, val_frames, trained_on,
                       init=Path(args.init) if args.init else None, progress=not args.quiet)
     if args.resume:
