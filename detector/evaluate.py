@@ -98,7 +98,7 @@ def eval_frames(predictor: Predictor, frames: Sequence[FrameAnnotations], batch_
                 gt_boxes=frame.boxes_cxcywh, gt_locations_m=frame.locations_m,
                 gt_distances_m=frame.distances_m, det_boxes=detections.boxes_cxcywh,
                 det_scores=detections.scores, principal_point=frame.principal_point,
-                camera=frame.camera, split=frame.split))
+                camera=frame.camera, split=frame.split, crowd_boxes=frame.crowd_cxcywh))
     return result
 
 

@@ -10,6 +10,9 @@
   placed by their foot point (`mPE`, `PE_near/mid/far` by GT distance) or by their box centre
   (`mPE_center`, ...).
 - precision / recall at one score threshold, matched at IoU 0.5.
+
+Crowd boxes (people marked `iscrowd`, too hidden to count) are ignore regions: a detection that
+matches no person but overlaps a crowd box at the IoU threshold counts neither way.
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ class EvalFrame:
     principal_point: tuple[float, float]
     camera: FisheyeCamera | None = None
     split: str = ""
+    crowd_boxes: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
 
     def __post_init__(self) -> None:
         g, d = len(self.gt_boxes), len(self.det_boxes)
@@ -54,12 +58,16 @@ class EvalFrame:
 
 @dataclass
 class FrameMatch:
-    """Greedy matches of one frame: `iou` (D, G) and per IoU threshold the GT index of each
-    detection (-1 when unmatched), detections sorted by descending score."""
+    """One frame's detections sorted by descending score (`order`), their IoU with the people
+    `iou` (D, G) and their largest IoU with any crowd box `crowd_iou` (D,)."""
 
     order: NDArray[np.int64]
     iou: FloatArray
-    matches: dict[float, NDArray[np.int64]] = field(default_factory=dict)
+    crowd_iou: FloatArray
+
+    def ignored(self, matched: NDArray[np.int64], threshold: float) -> NDArray[np.bool_]:
+        """(D,) unmatched detections that sit on a crowd box."""
+        return (matched < 0) & (self.crowd_iou >= threshold)
 
 
 def greedy_match(iou: FloatArray, threshold: float, gt_ignore: NDArray[np.bool_] | None = None
@@ -104,7 +112,9 @@ def average_precision(scores: FloatArray, true_positive: NDArray[np.bool_], num_
 def _prepare(frame: EvalFrame) -> FrameMatch:
     order = np.argsort(-frame.det_scores, kind="stable")[:MAX_DETECTIONS]
     iou = rotated_iou(frame.det_boxes[order], frame.gt_boxes, frame.principal_point)
-    return FrameMatch(order=order, iou=iou.reshape(len(order), len(frame.gt_boxes)))
+    crowd = rotated_iou(frame.det_boxes[order], frame.crowd_boxes, frame.principal_point)
+    crowd_iou = crowd.max(axis=1) if crowd.size else np.zeros(len(order))
+    return FrameMatch(order=order, iou=iou.reshape(len(order), len(frame.gt_boxes)), crowd_iou=crowd_iou)
 
 
 def _det_distances(frame: EvalFrame, order: NDArray[np.int64]) -> FloatArray:
@@ -125,7 +135,7 @@ def _ap_at(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch], threshol
             d = frame.gt_distances_m
             ignore = ~((d >= low) & (d < high))  # unknown distances are ignored too
         matched = greedy_match(match.iou, threshold, ignore)
-        keep = np.ones(len(matched), dtype=bool)
+        keep = ~match.ignored(matched, threshold)
         keep[matched >= 0] = ~ignore[matched[matched >= 0]]
         if distance_range is not None:
             distances = _det_distances(frame, match.order)
@@ -165,7 +175,7 @@ def precision_recall_at(frames: Sequence[EvalFrame], prepared: Sequence[FrameMat
     true_pos = n_det = n_gt = 0
     for frame, match in zip(frames, prepared, strict=True):
         matched = greedy_match(match.iou, 0.5)
-        above = frame.det_scores[match.order] >= min_score
+        above = (frame.det_scores[match.order] >= min_score) & ~match.ignored(matched, 0.5)
         true_pos += int((matched[above] >= 0).sum())
         n_det += int(above.sum())
         n_gt += len(frame.gt_boxes)
@@ -179,8 +189,10 @@ def pr_curve(frames: Sequence[EvalFrame]) -> tuple[FloatArray, FloatArray, Float
     scores, positives, num_gt = [], [], 0
     for frame in frames:
         match = _prepare(frame)
-        scores.append(frame.det_scores[match.order])
-        positives.append(greedy_match(match.iou, 0.5) >= 0)
+        matched = greedy_match(match.iou, 0.5)
+        keep = ~match.ignored(matched, 0.5)
+        scores.append(frame.det_scores[match.order][keep])
+        positives.append(matched[keep] >= 0)
         num_gt += len(frame.gt_boxes)
     all_scores = np.concatenate(scores) if scores else np.zeros(0)
     order = np.argsort(-all_scores, kind="stable")

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +32,9 @@ class DatasetFormatError(ValueError):
 class FrameAnnotations:
     """One frame and its people: `boxes_cxcywh` (N, 4) frame px radius-aligned about
     `principal_point`; `locations_m` (N, 2) floor metres, `distances_m` (N,) metres from the nadir
-    and `visible_fraction` (N,), NaN where the file does not say."""
+    and `visible_fraction` (N,), NaN where the file does not say. `crowd_cxcywh` (M, 4) are the
+    boxes marked `iscrowd` (people too hidden to count): evaluation neither rewards nor penalises
+    detections on them, training leaves them out."""
 
     path: Path
     image_id: int | str
@@ -45,6 +47,7 @@ class FrameAnnotations:
     locations_m: FloatArray
     distances_m: FloatArray
     visible_fraction: FloatArray
+    crowd_cxcywh: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
 
     def __post_init__(self) -> None:
         n = len(self.boxes_cxcywh)
@@ -110,7 +113,7 @@ def _frame(image: Mapping[str, Any], annotations: list[Mapping[str, Any]], folde
         except ValueError as error:
             raise DatasetFormatError(f"{where}: {error}") from None
     principal = camera.principal_point if camera is not None else ((width - 1) / 2, (height - 1) / 2)
-    boxes, locations, distances, visible = [], [], [], []
+    boxes, locations, distances, visible, crowd = [], [], [], [], []
     for index, annotation in enumerate(annotations):
         at = f"{where} annotation {annotation.get('id', index)!r}"
         if file_format == "fishloc":
@@ -122,6 +125,9 @@ def _frame(image: Mapping[str, Any], annotations: list[Mapping[str, Any]], folde
             if raw is None:
                 raise DatasetFormatError(f"{at}: no bbox")
             box = cepdof_to_radius_aligned(np.asarray([raw]), principal)[0].tolist()
+        if annotation.get("iscrowd", 0):
+            crowd.append(box)
+            continue
         location = _numbers(annotation, "location_m", 2, at)
         xy = np.asarray(location if location is not None else [np.nan, np.nan])
         distance = annotation.get("distance_m")
@@ -143,6 +149,7 @@ def _frame(image: Mapping[str, Any], annotations: list[Mapping[str, Any]], folde
         locations_m=np.asarray(locations, dtype=np.float64).reshape(n, 2),
         distances_m=np.asarray(distances, dtype=np.float64).reshape(n),
         visible_fraction=np.asarray(visible, dtype=np.float64).reshape(n),
+        crowd_cxcywh=np.asarray(crowd, dtype=np.float64).reshape(-1, 4),
     )
 
 
@@ -162,7 +169,7 @@ def read_dataset(path: str | Path) -> list[FrameAnnotations]:
     file_format = sniff_format(data)
     by_image: dict[Any, list[Mapping[str, Any]]] = {}
     for annotation in data.get("annotations") or []:
-        if int(annotation.get("category_id", 1)) == 1 and not annotation.get("iscrowd", 0):
+        if int(annotation.get("category_id", 1)) == 1:
             by_image.setdefault(annotation.get("image_id"), []).append(annotation)
     return [_frame(image, by_image.get(image.get("id"), []), source.parent, file_format, source)
             for image in data["images"]]
@@ -212,6 +219,10 @@ def write_dataset(frames: Sequence[FrameAnnotations], path: str | Path,
         images.append(image)
         for index in range(len(frame)):
             annotations.append(_annotation_record(frame, index, len(annotations) + 1))
+        for box in frame.crowd_cxcywh:
+            annotations.append({"id": len(annotations) + 1, "image_id": frame.image_id, "category_id": 1,
+                                "rotated_box": [float(v) for v in box], "area": float(box[2] * box[3]),
+                                "iscrowd": 1})
     document = {"info": dict(info or {}), "categories": [{"id": 1, "name": "person"}],
                 "images": images, "annotations": annotations}
     target.write_text(json.dumps(document, indent=1) + "\n", encoding="utf-8")

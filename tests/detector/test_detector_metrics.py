@@ -82,3 +82,15 @@ def test_distance_bins_precision_and_recall() -> None:
     # At 0.75: detections 0.9 (TP) and 0.8 (FP) -> precision 1/2, recall 1/3.
     assert metrics["precision"] == pytest.approx(0.5) and metrics["recall"] == pytest.approx(1 / 3)
     assert metrics["num_gt"] == 3
+
+
+def test_detections_on_crowd_boxes_count_neither_way() -> None:
+    person = [199.5, 119.5, 16.0, 40.0]
+    hidden = [260.0, 199.5, 12.0, 30.0]
+    frame = _frame([person], [[0.0, 2.0]], [person, hidden], [0.6, 0.9])
+    with_crowd = EvalFrame(frame.gt_boxes, frame.gt_locations_m, frame.gt_distances_m, frame.det_boxes,
+                           frame.det_scores, PP, CAMERA, crowd_boxes=np.array([hidden]))
+    assert compute_metrics([frame], 0.5)["AP50"] == pytest.approx(0.5)  # FP 0.9 before TP 0.6
+    metrics = compute_metrics([with_crowd], 0.5)
+    assert metrics["AP50"] == pytest.approx(1.0)
+    assert metrics["precision"] == 1.0 and metrics["recall"] == 1.0
