@@ -68,3 +68,21 @@ def test_frame_without_people(tmp_path: Path) -> None:
                                 "annotations": []}))
     (frame,) = read_dataset(path)
     assert frame.boxes_cxcywh.shape == (0, 4) and frame.locations_m.shape == (0, 2)
+
+
+def test_crowd_boxes_are_kept_apart_and_written_back(tmp_path: Path) -> None:
+    document = {
+        "images": [{"id": 1, "file_name": "a.jpg", "width": 100, "height": 100}],
+        "annotations": [
+            {"id": 1, "image_id": 1, "category_id": 1, "rotated_box": [20, 30, 5, 9], "iscrowd": 0},
+            {"id": 2, "image_id": 1, "category_id": 1, "rotated_box": [70, 60, 4, 6], "iscrowd": 1},
+        ],
+    }
+    path = tmp_path / "crowd.json"
+    path.write_text(json.dumps(document))
+    (frame,) = read_dataset(path)
+    np.testing.assert_allclose(frame.boxes_cxcywh, [[20, 30, 5, 9]])
+    np.testing.assert_allclose(frame.crowd_cxcywh, [[70, 60, 4, 6]])
+    write_dataset([frame], tmp_path / "again.json")
+    (again,) = read_dataset(tmp_path / "again.json")
+    np.testing.assert_allclose(again.crowd_cxcywh, frame.crowd_cxcywh)
