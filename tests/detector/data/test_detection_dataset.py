@@ -33,13 +33,16 @@ def test_rotation_augmentation_moves_image_and_boxes_together(toy_dataset: Calla
             sample = dataset[index]
             for box in sample.boxes_cxcywh:
                 assert _colour_at(sample.image.numpy(), box[:2]).min() > 120
-            np.testing.assert_allclose(sorted(sample.boxes_cxcywh[:, 3]), sorted(frames[index].boxes_cxcywh[:, 3]))
+            np.testing.assert_allclose(
+                sorted(sample.boxes_cxcywh[:, 3]), sorted(frames[index].boxes_cxcywh[:, 3])
+            )
 
 
 def test_augmentation_is_a_function_of_seed_epoch_and_index(toy_dataset: Callable[..., Path]) -> None:
     frames = read_dataset(toy_dataset(count=2, size=128))
     augment = AugmentConfig(rotation=True)
-    first, second = DetectionDataset(frames, 128, augment, seed=1), DetectionDataset(frames, 128, augment, seed=1)
+    first = DetectionDataset(frames, 128, augment, seed=1)
+    second = DetectionDataset(frames, 128, augment, seed=1)
     second.set_epoch(1)
     assert not np.array_equal(first[0].image.numpy(), second[0].image.numpy())
     second.set_epoch(0)
