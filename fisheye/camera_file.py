@@ -114,8 +114,12 @@ def camera_from_opencv(
     distortion = np.asarray(D, dtype=np.float64).reshape(-1)
     if distortion.size != 4:
         raise CalibrationError(f"D must hold 4 coefficients, got {distortion.size}")
+    if not (np.isfinite(matrix).all() and np.isfinite(distortion).all()):
+        raise CalibrationError("K and D must hold finite numbers")
     if abs(matrix[0, 1]) > 1e-9:
         raise CalibrationError("K has a skew term; FishLoc's camera model has none")
+    if abs(matrix[1, 0]) > 1e-9 or not np.allclose(matrix[2], [0.0, 0.0, 1.0]):
+        raise CalibrationError(f"K must be [[fx, 0, u0], [0, fy, v0], [0, 0, 1]], got {matrix.tolist()}")
     return camera_from_dict({
         "id": camera_id,
         "altitude_m": altitude_m,
@@ -127,35 +131,76 @@ def camera_from_opencv(
     })
 
 
-def read_opencv_calibration(path: str | Path) -> tuple[np.ndarray, np.ndarray, tuple[int, int] | None]:
-    """`K`, `D` and the image size (if stored) from an OpenCV FileStorage YAML/JSON file, or a
-    plain YAML/JSON with `K` (3x3 or 9 numbers), `D` and optional `image_size` [w, h]."""
+def _opencv_size(value: Any, file: Path) -> tuple[int, int]:
+    flat = np.asarray(value, dtype=np.float64).reshape(-1)
+    if flat.size != 2 or not np.isfinite(flat).all():
+        raise CalibrationError(f"{file}: image_size must be two numbers [w, h], got {value!r}")
+    return int(flat[0]), int(flat[1])
+
+
+def _read_opencv_storage(file: Path) -> tuple[Any, Any, tuple[int, int] | None]:
     import cv2
 
-    file = Path(path)
-    text = file.read_text(encoding="utf-8")
-    if text.lstrip().startswith("%YAML") or "opencv-matrix" in text:
+    try:
         storage = cv2.FileStorage(str(file), cv2.FILE_STORAGE_READ)
-        try:
-            K, D = storage.getNode("K").mat(), storage.getNode("D").mat()
-            size_node = storage.getNode("image_size")
-            size = None
-            if not size_node.empty():
-                values = size_node.mat() if size_node.isMap() else [
-                    size_node.at(i).real() for i in range(size_node.size())
-                ]
-                flat = np.asarray(values).reshape(-1)
-                size = (int(flat[0]), int(flat[1]))
-        finally:
-            storage.release()
-        if K is None or D is None:
-            raise CalibrationError(f"{file}: FileStorage needs nodes K and D")
-        return np.asarray(K, dtype=np.float64), np.asarray(D, dtype=np.float64).reshape(-1), size
-    data = json.loads(text) if file.suffix.lower() == ".json" else yaml.safe_load(text)
-    if not isinstance(data, Mapping) or "K" not in data or "D" not in data:
-        raise CalibrationError(f"{file}: expected fields K and D")
-    K = np.asarray(data["K"], dtype=np.float64).reshape(3, 3)
-    D = np.asarray(data["D"], dtype=np.float64).reshape(-1)
-    size_value = data.get("image_size")
-    size = (int(size_value[0]), int(size_value[1])) if size_value is not None else None
+    except cv2.error as error:
+        raise CalibrationError(f"{file}: OpenCV cannot read it: {error}") from None
+    try:
+        nodes = {name: storage.getNode(name) for name in
+                 ("K", "D", "camera_matrix", "distortion_coefficients", "image_size", "image_width",
+                  "image_height")}
+        K = (nodes["K"] if not nodes["K"].empty() else nodes["camera_matrix"]).mat()
+        D = (nodes["D"] if not nodes["D"].empty() else nodes["distortion_coefficients"]).mat()
+        size = None
+        size_node = nodes["image_size"]
+        if not size_node.empty():
+            values = size_node.mat() if size_node.isMap() else [
+                size_node.at(i).real() for i in range(size_node.size())
+            ]
+            size = _opencv_size(values, file)
+        elif not nodes["image_width"].empty() and not nodes["image_height"].empty():
+            size = _opencv_size([nodes["image_width"].real(), nodes["image_height"].real()], file)
+    finally:
+        storage.release()
     return K, D, size
+
+
+def read_opencv_calibration(path: str | Path) -> tuple[np.ndarray, np.ndarray, tuple[int, int] | None]:
+    """`K`, `D` and the image size (if stored) from an OpenCV FileStorage YAML/JSON file, or a
+    plain YAML/JSON with `K` (3x3 or 9 numbers), `D` and optional `image_size` [w, h].
+
+    OpenCV's sample names `camera_matrix`, `distortion_coefficients`, `image_width` and
+    `image_height` are read as well.
+    """
+    file = Path(path)
+    try:
+        text = file.read_text(encoding="utf-8")
+    except OSError as error:
+        raise CalibrationError(f"cannot read OpenCV calibration {file}: {error.strerror}") from None
+    if text.lstrip().startswith("%YAML") or "opencv-matrix" in text:
+        K, D, size = _read_opencv_storage(file)
+    else:
+        try:
+            data = json.loads(text) if file.suffix.lower() == ".json" else yaml.safe_load(text)
+        except (json.JSONDecodeError, yaml.YAMLError) as error:
+            raise CalibrationError(f"{file} is not valid YAML/JSON: {error}") from None
+        if not isinstance(data, Mapping):
+            raise CalibrationError(f"{file}: expected a mapping with fields K and D")
+        K = data.get("K", data.get("camera_matrix"))
+        D = data.get("D", data.get("distortion_coefficients"))
+        size = None
+        if data.get("image_size") is not None:
+            size = _opencv_size(data["image_size"], file)
+        elif data.get("image_width") is not None and data.get("image_height") is not None:
+            size = _opencv_size([data["image_width"], data["image_height"]], file)
+    if K is None or D is None:
+        raise CalibrationError(f"{file}: needs K (camera_matrix) and D (distortion_coefficients)")
+    try:
+        matrix = np.asarray(K, dtype=np.float64).reshape(3, 3)
+    except (ValueError, TypeError):
+        raise CalibrationError(f"{file}: K must be a 3x3 matrix or 9 numbers") from None
+    try:
+        distortion = np.asarray(D, dtype=np.float64).reshape(-1)
+    except (ValueError, TypeError):
+        raise CalibrationError(f"{file}: D must be 4 numbers") from None
+    return matrix, distortion, size

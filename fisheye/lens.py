@@ -15,6 +15,8 @@ THETA_TOLERANCE_RAD = 1e-12
 _NEWTON_ITERATIONS = 30
 _BISECTION_ITERATIONS = 80
 _MONOTONIC_SAMPLES = 2049
+# A radius this close above r(θmax) (rounding in a pixel round trip) still maps to θmax.
+_RADIUS_MAX_RELATIVE_SLACK = 1e-12
 
 
 def theta_to_radius(theta_rad: ArrayLike, kb: ArrayLike) -> FloatArray:
@@ -76,10 +78,10 @@ def radius_to_theta(radius: ArrayLike, kb: ArrayLike, theta_max_rad: float) -> F
     target = target.reshape(-1)
     radius_max = float(theta_to_radius(theta_max_rad, coeffs))
     theta = np.full(target.shape, np.nan)
-    ok = np.isfinite(target) & (target >= 0) & (target <= radius_max)
+    ok = np.isfinite(target) & (target >= 0) & (target <= radius_max * (1 + _RADIUS_MAX_RELATIVE_SLACK))
     if not ok.any():
         return theta.reshape(shape)
-    goal = target[ok]
+    goal = np.minimum(target[ok], radius_max)
     lo = np.zeros_like(goal)
     hi = np.full_like(goal, theta_max_rad)
     estimate = np.clip(goal / coeffs[0], 0.0, theta_max_rad)
@@ -90,11 +92,13 @@ def radius_to_theta(radius: ArrayLike, kb: ArrayLike, theta_max_rad: float) -> F
         hi = np.where(residual > 0, estimate, hi)
         slope = radius_derivative(estimate, coeffs)
         with np.errstate(divide="ignore", invalid="ignore"):
-            step = residual / slope
+            step = np.where(residual == 0, 0.0, residual / slope)
         candidate = estimate - step
-        outside = ~np.isfinite(candidate) | (candidate <= lo) | (candidate >= hi)
+        # The root lies in the closed bracket [lo, hi]; a Newton step that leaves it is replaced by
+        # the bracket's midpoint.
+        outside = ~np.isfinite(candidate) | (candidate < lo) | (candidate > hi)
         candidate = np.where(outside, 0.5 * (lo + hi), candidate)
-        converged = np.abs(candidate - estimate) < THETA_TOLERANCE_RAD
+        converged = (residual == 0) | (np.abs(candidate - estimate) < THETA_TOLERANCE_RAD)
         estimate = candidate
         if converged.all():
             break

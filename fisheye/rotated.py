@@ -49,13 +49,15 @@ def _clip(subject: FloatArray, counts: IntArray, edge_from: FloatArray, edge_to:
     following = np.where(index + 1 < counts[:, None], index + 1, 0)
     nxt = np.take_along_axis(subject, following[:, :, None], axis=1)
     side_next = np.take_along_axis(side, following, axis=1)
-    inside, inside_next = side >= 0, side_next >= 0
-    # t is only used where the edge is crossed (side and side_next differ in sign, so no 0/0).
+    inside = side >= 0
+    # Only a strict change of sign is a crossing: a vertex on the edge is kept once, as a vertex,
+    # so touching polygons never gain duplicate vertices (at most one new vertex per clip).
+    crosses = ((side > 0) & (side_next < 0)) | ((side < 0) & (side_next > 0))
     denominator = side - side_next
     t = side / np.where(denominator == 0, 1.0, denominator)
     crossing = subject + t[:, :, None] * (nxt - subject)
     candidates = np.stack([subject, crossing], axis=2).reshape(P, 2 * V, 2)
-    keep = np.stack([inside & present, (inside != inside_next) & present], axis=2).reshape(P, 2 * V)
+    keep = np.stack([inside & present, crosses & present], axis=2).reshape(P, 2 * V)
     order = np.argsort(~keep, axis=1, kind="stable")[:, :V]
     clipped = np.take_along_axis(candidates, order[:, :, None], axis=1)
     return clipped, np.minimum(keep.sum(axis=1), V)

@@ -1,0 +1,45 @@
+"""The REST application factory."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI
+
+from service.dependencies import ServiceState
+from service.errors import install_error_handlers
+from service.middleware import RequestContextMiddleware
+from service.routes import cameras, detect, health, metrics, model
+
+log = logging.getLogger(__name__)
+
+DESCRIPTION = """Finds people in overhead fisheye frames and tells where they stand on the floor, in metres.
+
+Errors answer `{"error": {"code": "...", "message": "..."}}`. Registry writes need
+`Authorization: Bearer <token>` when the server has a token (FISHLOC_API_TOKEN)."""
+
+
+def create_app(state: ServiceState, warm_up: bool = True) -> FastAPI:
+    """A FastAPI app over one service state; the model is warmed up in the background at start
+    (`/readyz` answers 503 until then)."""
+
+    @asynccontextmanager
+    async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
+        task = asyncio.create_task(state.runner.warm_up()) if warm_up and not state.runner.ready else None
+        yield
+        if task is not None and not task.done():
+            task.cancel()
+
+    app = FastAPI(
+        title="FishLoc", version="1", description=DESCRIPTION, lifespan=lifespan,
+        docs_url="/docs", redoc_url=None,
+    )
+    app.state.fishloc = state
+    install_error_handlers(app)
+    for module in (health, model, cameras, detect, metrics):
+        app.include_router(module.router)
+    app.add_middleware(RequestContextMiddleware, metrics=state.metrics)
+    return app

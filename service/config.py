@@ -1,0 +1,59 @@
+"""Service settings: `fishloc serve` flags over `FISHLOC_*` environment variables over defaults.
+
+Read once at start (pydantic-settings) and handed to the factories; nothing below the entry points
+reads the environment.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from pydantic import Field, SecretStr, field_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
+from service.cpu import cpu_budget
+
+
+def default_database_path() -> Path:
+    """Where the camera registry lives unless told otherwise: $XDG_DATA_HOME/fishloc/cameras.db."""
+    base = os.environ.get("XDG_DATA_HOME") or str(Path.home() / ".local" / "share")
+    return Path(base) / "fishloc" / "cameras.db"
+
+
+class Settings(BaseSettings):
+    """Everything `fishloc serve` can be told (flag, or environment variable FISHLOC_<NAME>)."""
+
+    model_config = SettingsConfigDict(env_prefix="FISHLOC_", extra="ignore", frozen=True)
+
+    host: str = Field("127.0.0.1", description="address to listen on (0.0.0.0 in containers)")
+    http_port: int = Field(8000, ge=0, le=65535, description="REST port (0: any free port)")
+    grpc_port: int = Field(50051, ge=-1, le=65535, description="gRPC port (0: any free port, -1: no gRPC)")
+    model: Path = Field(DEFAULT_MODEL_PATH, description="ONNX model following the FishLoc contract")
+    cameras: Path | None = Field(None, description="camera file or folder written to the registry at start")
+    database: str = Field(default_factory=lambda: str(default_database_path()),
+                          description="camera registry: SQLAlchemy URL or SQLite file path")
+    demo_camera: bool = Field(True, description="add the `demo` camera the first time a database is used")
+    demo_camera_path: Path = DEMO_CAMERA_PATH
+    api_token: SecretStr | None = Field(None, description="bearer token required for registry writes")
+    max_body_bytes: int = Field(32 * 1024 * 1024, ge=1024, description="largest encoded frame accepted")
+    max_pixels: int = Field(40_000_000, ge=1, description="largest decoded frame (width × height)")
+    threads: int = Field(default_factory=cpu_budget, ge=1,
+                         description="inference threads (default: the CPU quota of the container)")
+    max_in_flight: int | None = Field(None, ge=1,
+                                      description="frames admitted at once before 503 (default 4 × threads)")
+    retry_after_s: int = Field(1, ge=1, description="Retry-After of an overload answer")
+    nms_iou: float = Field(0.45, gt=0, le=1, description="rotated NMS IoU threshold")
+    grpc_max_message_bytes: int = Field(32 * 1024 * 1024, ge=1024)
+    log_level: str = Field("info", description="debug, info, warning, error")
+    log_json: bool = Field(True, description="JSON log lines (false: plain text)")
+
+    @field_validator("api_token")
+    @classmethod
+    def _empty_token_is_none(cls, value: SecretStr | None) -> SecretStr | None:
+        return None if value is None or not value.get_secret_value() else value
+
+    @property
+    def in_flight_limit(self) -> int:
+        return self.max_in_flight if self.max_in_flight is not None else 4 * self.threads

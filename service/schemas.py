@@ -1,0 +1,100 @@
+"""JSON shapes of the REST API, for the OpenAPI document (answers are built by `service.result`)."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, Field
+
+from fisheye import FisheyeCamera
+
+
+class ErrorBody(BaseModel):
+    code: str = Field(description="stable machine-readable reason, e.g. camera_not_found")
+    message: str
+
+
+class ErrorResponse(BaseModel):
+    error: ErrorBody
+
+
+class Box(BaseModel):
+    cx: float = Field(description="centre u (frame px)")
+    cy: float = Field(description="centre v (frame px)")
+    w: float = Field(description="extent across the ray from the principal point (px)")
+    h: float = Field(description="extent along the ray (px)")
+    angle_deg: float = Field(
+        description="direction of the h axis, atan2(cy - v0, cx - u0), clockwise on screen"
+    )
+
+
+class Detection(BaseModel):
+    score: float
+    box: Box
+    corners: list[list[float]] = Field(
+        description="4 corners [u, v] px: the two nearest the principal point first"
+    )
+    foot_px: list[float] | None = Field(description="[u, v] px, the box point nearest the principal point")
+    position_m: list[float] | None = Field(description="[x, y] m on the floor (camera floor frame); "
+                                                       "null when the foot point has no floor point")
+    distance_m: float | None = Field(description="distance from the nadir (m)")
+    site_position_m: list[float] | None = Field(
+        description="[x, y] m in the site frame, when the camera has a site pose"
+    )
+
+
+class ImageSize(BaseModel):
+    width: int
+    height: int
+
+
+class ModelRef(BaseModel):
+    name: str
+    version: str
+
+
+class Timing(BaseModel):
+    decode: float
+    preprocess: float
+    inference: float
+    postprocess: float = Field(description="score threshold, NMS, foot points and floor positions")
+    total: float
+
+
+class DetectResponse(BaseModel):
+    camera_id: str
+    frame_id: str | None
+    image: ImageSize
+    model: ModelRef
+    detections: list[Detection]
+    timing_ms: Timing
+
+
+class CameraList(BaseModel):
+    cameras: list[FisheyeCamera]
+
+
+class ModelResponse(BaseModel):
+    name: str
+    version: str
+    input_size: int = Field(description="side S of the square model input (px)")
+    trained_on: str
+    box_format: str
+    default_min_score: float
+    pad_value: int
+    sha256: str = Field(description="SHA-256 of the model file")
+
+
+class Status(BaseModel):
+    status: str
+
+
+def error_responses(*statuses: int) -> dict[int | str, dict[str, object]]:
+    """OpenAPI `responses` entries for error statuses, all in the error shape."""
+    descriptions = {
+        400: "bad request (e.g. undecodable image)", 401: "missing or wrong bearer token",
+        404: "no such camera", 413: "body or decoded image too large", 415: "not a JPEG/PNG/multipart body",
+        422: "invalid parameters or camera record", 503: "not ready, or overloaded (see Retry-After)",
+    }
+    return {
+        status: {"model": ErrorResponse, "description": descriptions.get(status, "error")}
+        for status in statuses
+    }

@@ -1,0 +1,72 @@
+"""`fishloc serve`: the REST (and gRPC) service over the default model and the `demo` camera."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import sys
+from pathlib import Path
+
+from pydantic import ValidationError
+
+from fisheye import CalibrationError
+from models import DEFAULT_MODEL_PATH
+from service.config import Settings
+from service.logs import configure_logging
+from service.onnx_model import ModelError
+
+log = logging.getLogger("fishloc.serve")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.description = (
+        "Serve the model over REST and gRPC. Every flag can also be set as FISHLOC_<NAME> in the "
+        "environment (e.g. FISHLOC_API_TOKEN, FISHLOC_MAX_IN_FLIGHT); flags win."
+    )
+    parser.add_argument("--host", help="address to listen on (default 127.0.0.1; 0.0.0.0 in containers)")
+    parser.add_argument("--http-port", type=int, help="REST port (default 8000)")
+    parser.add_argument("--grpc-port", type=int, help="gRPC port (default 50051; -1: no gRPC)")
+    parser.add_argument("--model", type=Path,
+                        help="ONNX model (default: the shipped models/fishloc-default.onnx)")
+    parser.add_argument("--cameras", type=Path, metavar="FILE_OR_DIR",
+                        help="camera file or folder of them, written to the registry at start")
+    parser.add_argument("--database", metavar="URL_OR_PATH",
+                        help="camera registry: SQLite file or SQLAlchemy URL "
+                             "(default ~/.local/share/fishloc/cameras.db)")
+    parser.add_argument("--threads", type=int, help="inference threads (default: the container's CPU quota)")
+    parser.add_argument("--no-demo-camera", dest="demo_camera", action="store_const", const=False,
+                        help="do not add the demo camera to a new database")
+
+
+def settings_from_args(args: argparse.Namespace) -> Settings:
+    """Settings from the environment with the flags that were given on top."""
+    names = ("host", "http_port", "grpc_port", "model", "cameras", "database", "threads", "demo_camera")
+    overrides = {name: getattr(args, name) for name in names if getattr(args, name, None) is not None}
+    return Settings(**overrides)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        settings = settings_from_args(args)
+    except ValidationError as error:
+        print(f"fishloc serve: invalid settings:\n{error}", file=sys.stderr)
+        return 2
+    configure_logging(settings.log_level, settings.log_json)
+    from service.server import run_service
+
+    try:
+        asyncio.run(run_service(settings))
+    except ModelError as error:
+        hint = ""
+        if settings.model == DEFAULT_MODEL_PATH and not settings.model.exists():
+            hint = ("\nThe shipped default model is missing from this checkout; make it with "
+                    "`fishloc export` (README) or pass --model PATH.")
+        print(f"fishloc serve: cannot load the model: {error}{hint}", file=sys.stderr)
+        return 2
+    except CalibrationError as error:
+        print(f"fishloc serve: bad camera file: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        pass
+    return 0

@@ -1,0 +1,83 @@
+"""A real FishLoc service (uvicorn on a free loopback port) running in a background thread."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+from typing import Any
+
+import httpx
+
+from service.config import Settings
+from service.dependencies import ServiceState
+from service.server import Service, build_state
+
+
+class LiveServer:
+    """Start with `start()`, stop with `stop()`; `url` is the REST base URL."""
+
+    def __init__(self, settings: Settings, warm_up: bool = True) -> None:
+        self.settings = settings
+        self.warm_up = warm_up
+        self._thread = threading.Thread(target=self._run, name="live-server", daemon=True)
+        self._started = threading.Event()
+        self._error: BaseException | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stop: asyncio.Event | None = None
+        self.service: Service | None = None
+
+    @property
+    def state(self) -> ServiceState:
+        assert self.service is not None
+        return self.service.state
+
+    @property
+    def url(self) -> str:
+        assert self.service is not None
+        return f"http://127.0.0.1:{self.service.http_port}"
+
+    def _run(self) -> None:
+        try:
+            asyncio.run(self._main())
+        except BaseException as error:  # reported to the starting thread
+            self._error = error
+            self._started.set()
+
+    async def _main(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._stop = asyncio.Event()
+        self.service = Service(build_state(self.settings), warm_up=self.warm_up)
+        await self.service.start()
+        self._started.set()
+        await self._stop.wait()
+        await self.service.stop()
+
+    def start(self, wait_ready: bool = True) -> LiveServer:
+        self._thread.start()
+        if not self._started.wait(60):
+            raise TimeoutError("the service did not start")
+        if self._error is not None:
+            raise self._error
+        if wait_ready:
+            self.wait_ready()
+        return self
+
+    def wait_ready(self, timeout_s: float = 60) -> None:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if httpx.get(f"{self.url}/readyz").status_code == 200:
+                return
+            time.sleep(0.02)
+        raise TimeoutError("the service did not become ready")
+
+    def stop(self) -> None:
+        if self._loop is not None and self._stop is not None:
+            self._loop.call_soon_threadsafe(self._stop.set)
+        self._thread.join(60)
+
+    def __enter__(self) -> LiveServer:
+        return self.start()
+
+    def __exit__(self, *_exc: Any) -> None:
+        self.stop()
