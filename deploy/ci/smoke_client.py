@@ -138,14 +138,24 @@ def check_metrics(base: str) -> None:
     print(f"smoke: /metrics HTTP 200, {text.count('# TYPE')} metric families")
 
 
-def check_grpc_health(target: str) -> None:
+def check_grpc_health(target: str, timeout_s: float = 15.0) -> None:
+    """grpc.health.v1 Check answers SERVING (what the Kubernetes liveness probe asks)."""
     import grpc
     from grpc_health.v1 import health_pb2, health_pb2_grpc
 
-    with grpc.insecure_channel(target) as channel:
-        reply = health_pb2_grpc.HealthStub(channel).Check(health_pb2.HealthCheckRequest(), timeout=10)
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            with grpc.insecure_channel(target) as channel:
+                stub = health_pb2_grpc.HealthStub(channel)
+                reply = stub.Check(health_pb2.HealthCheckRequest(), timeout=5)
+            break
+        except grpc.RpcError as error:
+            if time.monotonic() > deadline:
+                raise SmokeError(f"gRPC health on {target}: {error.code()} {error.details()}") from None
+            time.sleep(1)
     if reply.status != health_pb2.HealthCheckResponse.SERVING:
-        raise SmokeError(f"gRPC health on {target}: {reply.status}")
+        raise SmokeError(f"gRPC health on {target}: status {reply.status}, not SERVING")
     print(f"smoke: gRPC health on {target}: SERVING")
 
 
