@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Offline checks of the deployment files: hadolint on the Dockerfile, kubernetes-validate --strict
-# on the Kubernetes manifests, `docker-compose config` on the compose file.
+# on the Kubernetes manifests, promtool on the Prometheus config, `docker-compose config` on the
+# compose file.
 # Usage: deploy/ci/check-manifests.sh    (tools from the dev extra in .venv, docker-compose from Debian)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -22,6 +23,16 @@ VALIDATE=$(tool kubernetes-validate) || {
 mapfile -t MANIFESTS < <(find deploy/k8s -name '*.yaml' ! -name kustomization.yaml | sort)
 "$VALIDATE" --strict --quiet "${MANIFESTS[@]}"
 echo "check-manifests: kubernetes-validate --strict ${#MANIFESTS[@]} manifests ok"
+
+if command -v promtool >/dev/null; then
+    promtool check config deploy/prometheus/prometheus.yml >/dev/null
+    echo "check-manifests: promtool check config deploy/prometheus/prometheus.yml ok"
+elif [ "${CI:-}" = true ]; then
+    echo "check-manifests: promtool missing in CI (apt-get install -y prometheus)" >&2
+    exit 1
+else
+    echo "check-manifests: promtool not installed here, Prometheus config not checked"
+fi
 
 if command -v docker-compose >/dev/null; then
     docker-compose -f deploy/compose.yaml config --quiet

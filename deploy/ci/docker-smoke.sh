@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Build the FishLoc image for real and check it as a user would: run it (read-only root, non-root,
 # one CPU), wait for /readyz, POST a sample frame of the demo camera and check the answer, the
-# metrics, gRPC health and the Docker HEALTHCHECK.
+# metrics (scraped by a real Prometheus), gRPC health and the Docker HEALTHCHECK.
 # Usage: deploy/ci/docker-smoke.sh    (root; a running engine and the base image: see run.sh)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -64,6 +64,15 @@ fail() {
 
 "$PYTHON" deploy/ci/smoke_client.py --http "http://127.0.0.1:$http_port" --grpc "127.0.0.1:$grpc_port" \
     --samples samples || fail "smoke client"
+
+# The compose file's Prometheus config, run by a real Prometheus against this container.
+if command -v prometheus >/dev/null; then
+    "$PYTHON" deploy/ci/prometheus_scrape.py --target "127.0.0.1:$http_port" || fail "Prometheus scrape"
+elif [ "${CI:-}" = true ]; then
+    fail "prometheus missing in CI (apt-get install -y --no-install-recommends prometheus)"
+else
+    echo "docker-smoke: prometheus not installed here, scrape not checked"
+fi
 
 uid=$("$DOCKER" exec "$NAME" id -u)
 [ "$uid" = 10001 ] || fail "the service runs as uid $uid, not 10001"
