@@ -79,6 +79,9 @@ uid=$("$DOCKER" exec "$NAME" id -u)
 threads=$("$DOCKER" exec "$NAME" python -c "from service.config import Settings; print(Settings().threads)")
 [ "$threads" = 1 ] || fail "inference threads are $threads under a 1-CPU limit"
 echo "docker-smoke: runs as uid $uid on a read-only root; $threads inference thread under --cpus 1"
+libpq=$("$DOCKER" exec "$NAME" python -c "import psycopg; print(psycopg.pq.version())") \
+    || fail "the PostgreSQL driver does not load in the image"
+echo "docker-smoke: PostgreSQL driver loads (libpq $libpq)"
 
 for _ in $(seq 1 30); do
     health=$("$DOCKER" inspect --format '{{.State.Health.Status}}' "$NAME")
