@@ -3,7 +3,7 @@
 SQLite file by default; any SQLAlchemy URL (e.g. `postgresql+psycopg://...`) works the same way.
 Each row holds one camera-file record as JSON and a revision number that every write bumps. Reads go
 to the database on every frame, so a change takes effect on the next frame, in every process that
-shares the database; the parsed camera is cached per (id, revision) so validation is paid once.
+shares the database; the parsed camera is cached per (id, record) so validation is paid once.
 Cameras are immutable objects: a detection that started before a PUT or DELETE finishes with the
 calibration it read.
 """
@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import logging
 import threading
+import time
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,7 +33,7 @@ from sqlalchemy import (
     update,
 )
 from sqlalchemy.engine import Engine
-from sqlalchemy.exc import IntegrityError
+from sqlalchemy.exc import IntegrityError, ProgrammingError
 from sqlalchemy.pool import StaticPool
 
 from fisheye import CalibrationError, FisheyeCamera, camera_from_dict, camera_to_dict, load_camera
@@ -85,6 +86,20 @@ def _engine(url: str) -> Engine:
     return engine
 
 
+def _create_tables(engine: Engine, attempts: int = 5) -> None:
+    """Create the registry's tables unless they exist. Replicas starting together on a new database
+    race to create them; the losers (IntegrityError or ProgrammingError on PostgreSQL) look again
+    and find them made."""
+    for attempt in range(attempts):
+        try:
+            _metadata.create_all(engine)
+            return
+        except (IntegrityError, ProgrammingError):
+            if attempt == attempts - 1:
+                raise
+            time.sleep(0.05 * (attempt + 1))
+
+
 @dataclass(frozen=True)
 class PutOutcome:
     """What a write did: the stored camera and whether it was new."""
@@ -99,8 +114,8 @@ class CameraRegistry:
     def __init__(self, url_or_path: str | Path) -> None:
         self.url = database_url(url_or_path)
         self.engine = _engine(self.url)
-        _metadata.create_all(self.engine)
-        self._cache: dict[str, tuple[int, FisheyeCamera]] = {}
+        _create_tables(self.engine)
+        self._cache: dict[str, tuple[str, FisheyeCamera]] = {}
         self._cache_lock = threading.Lock()
 
     def close(self) -> None:
@@ -115,14 +130,16 @@ class CameraRegistry:
             row = connection.execute(columns.where(cameras_table.c.id == camera_id)).first()
         if row is None:
             return None
-        record, revision = str(row[0]), int(row[1])
+        # Keyed by the stored record, not the revision: a camera deleted and made again through
+        # another process starts again at revision 1.
+        record = str(row[0])
         with self._cache_lock:
             cached = self._cache.get(camera_id)
-        if cached is not None and cached[0] == revision:
+        if cached is not None and cached[0] == record:
             return cached[1]
         camera = camera_from_dict(json.loads(record))
         with self._cache_lock:
-            self._cache[camera_id] = (revision, camera)
+            self._cache[camera_id] = (record, camera)
         return camera
 
     def all(self) -> list[FisheyeCamera]:

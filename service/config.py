@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from pydantic import Field, SecretStr, field_validator
+from pydantic import AliasChoices, Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
@@ -25,14 +25,17 @@ def default_database_path() -> Path:
 class Settings(BaseSettings):
     """Everything `fishloc serve` can be told (flag, or environment variable FISHLOC_<NAME>)."""
 
-    model_config = SettingsConfigDict(env_prefix="FISHLOC_", extra="ignore", frozen=True)
+    model_config = SettingsConfigDict(env_prefix="FISHLOC_", extra="ignore", frozen=True,
+                                      populate_by_name=True)
 
     host: str = Field("127.0.0.1", description="address to listen on (0.0.0.0 in containers)")
     http_port: int = Field(8000, ge=0, le=65535, description="REST port (0: any free port)")
     grpc_port: int = Field(50051, ge=-1, le=65535, description="gRPC port (0: any free port, -1: no gRPC)")
     model: Path = Field(DEFAULT_MODEL_PATH, description="ONNX model following the FishLoc contract")
     cameras: Path | None = Field(None, description="camera file or folder written to the registry at start")
+    # FISHLOC_DATABASE_URL is the name deployments use (a URL from a Secret); FISHLOC_DATABASE also works.
     database: str = Field(default_factory=lambda: str(default_database_path()),
+                          validation_alias=AliasChoices("FISHLOC_DATABASE_URL", "FISHLOC_DATABASE"),
                           description="camera registry: SQLAlchemy URL or SQLite file path")
     demo_camera: bool = Field(True, description="add the `demo` camera the first time a database is used")
     demo_camera_path: Path = DEMO_CAMERA_PATH
