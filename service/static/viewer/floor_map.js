@@ -11,6 +11,18 @@ export function squareBounds(cx, cy, half) {
   return { xmin: cx - half, xmax: cx + half, ymin: cy - half, ymax: cy + half };
 }
 
+/** `bounds` widened (about its centre) to the aspect ratio of the drawing area `rect`. */
+function fitAspect(bounds, rect) {
+  if (!(rect.width > 0 && rect.height > 0)) return bounds;
+  const width = bounds.xmax - bounds.xmin;
+  const height = bounds.ymax - bounds.ymin;
+  const aspect = rect.width / rect.height;
+  const cx = (bounds.xmin + bounds.xmax) / 2;
+  const cy = (bounds.ymin + bounds.ymax) / 2;
+  const half = [Math.max(width, height * aspect) / 2, Math.max(height, width / aspect) / 2];
+  return { xmin: cx - half[0], xmax: cx + half[0], ymin: cy - half[1], ymax: cy + half[1] };
+}
+
 function gridLayer(bounds, step, fontM) {
   const layer = svg("g", { class: "grid" });
   const { xmin, xmax, ymin, ymax } = bounds;
@@ -69,10 +81,14 @@ function peopleLayer(people, fontM) {
  * cameras: [{camera, origin: [x, y] m, yawDeg, showRings}]; people: [{xy: [x, y] m, label, cameraId,
  * index}]; bounds: {xmin, xmax, ymin, ymax} m.
  */
-export function drawMap(root, { cameras, people, bounds }) {
-  const span = Math.max(bounds.xmax - bounds.xmin, bounds.ymax - bounds.ymin);
-  const fontM = span / 40;
-  const step = niceStep(span, 10);
+export function drawMap(root, { cameras, people, bounds: wanted }) {
+  const rect = root.getBoundingClientRect();
+  const bounds = fitAspect(wanted, rect);
+  const width = bounds.xmax - bounds.xmin;
+  const height = bounds.ymax - bounds.ymin;
+  // Text about 13 screen px high, whatever the map's scale.
+  const fontM = rect.width > 0 ? (13 * width) / rect.width : Math.max(width, height) / 40;
+  const step = niceStep(Math.min(width, height), 8);
   const ringStep = Math.max(1, step);
   root.replaceChildren();
   root.setAttribute("viewBox", `${bounds.xmin} ${-bounds.ymax} ${bounds.xmax - bounds.xmin} ${bounds.ymax - bounds.ymin}`);

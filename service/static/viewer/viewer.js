@@ -179,9 +179,8 @@ async function renderSite() {
   });
   fillTable(rows);
   const withFrames = records.filter(Boolean).map((r) => r.sequence);
-  $("site-info").textContent = `${posed.length} cameras with a site pose, ${people.length} people ` +
-    `(latest frame of each camera)` + (posed.length < state.cameras.length
-      ? `; ${state.cameras.length - posed.length} cameras have no site pose` : "");
+  $("site-info").textContent = `cameras with a site pose: ${posed.length}, people: ${people.length} (latest frame of each camera)` + (posed.length < state.cameras.length
+      ? `; not on it (no site pose): ${state.cameras.filter((c) => !c.site_pose).map((c) => c.id).join(", ")}` : "");
   state.site = { cameras: posed.map((c) => c.id), sequences: withFrames, people: people.length };
   state.renders += 1;
   document.body.dataset.shown = `site:${withFrames.join(",")}`;
