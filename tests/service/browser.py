@@ -90,9 +90,11 @@ def console_errors(driver: Any) -> list[str]:
             if entry["level"] == "SEVERE" and not _EXPECTED_ERRORS.search(entry["message"])]
 
 
-def save_screenshot(driver: Any, name: str) -> Path:
+def save_screenshot(driver: Any, name: str, capsys: pytest.CaptureFixture[str]) -> Path:
+    """Save a screenshot under artifacts/ (a CI artefact) and print its path past pytest's capture."""
     ARTIFACTS_DIR.mkdir(exist_ok=True)
     path = ARTIFACTS_DIR / name
     driver.save_screenshot(str(path))
-    print(f"viewer screenshot: {path}")
+    with capsys.disabled():
+        print(f"\nviewer screenshot: {path}")
     return path

@@ -123,6 +123,7 @@ def detect(server: LiveServer, data: bytes, camera_id: str = "demo", **params: s
 
 def test_uploaded_frame_is_drawn_as_the_api_answers(
     driver: Any, server: LiveServer, demo_camera: FisheyeCamera, tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
 ) -> None:
     truth = person_frame(demo_camera, (1.5, -1.1), demo_camera.image_size)
     path = tmp_path / "person.jpg"
@@ -134,7 +135,7 @@ def test_uploaded_frame_is_drawn_as_the_api_answers(
     np.testing.assert_allclose(answer["detections"][0]["position_m"], truth.floor_xy_m, atol=0.005)
     assert page["result"]["frame_id"] == "person.jpg"
     assert_page_matches(page, answer)
-    save_screenshot(driver, "viewer.png")
+    save_screenshot(driver, "viewer.png", capsys)
     assert console_errors(driver) == []
 
 
@@ -211,7 +212,7 @@ def test_latest_frame_from_another_client_is_shown(
 
 
 def test_site_map_shows_every_posed_camera_and_its_people(
-    driver: Any, server: LiveServer, demo_camera: FisheyeCamera,
+    driver: Any, server: LiveServer, demo_camera: FisheyeCamera, capsys: pytest.CaptureFixture[str],
 ) -> None:
     annex = dict(camera_to_dict(demo_camera), id="annex", site_pose={"x_m": 9.0, "y_m": 2.0, "yaw_deg": 90.0})
     assert httpx.put(f"{server.url}/v1/cameras/annex", json=annex).status_code in (200, 201)
@@ -240,11 +241,12 @@ def test_site_map_shows_every_posed_camera_and_its_people(
         "return [...document.querySelectorAll('#site-map g.camera')].map((g) => g.dataset.camera)")
     assert sorted(cameras) == ["annex", "demo"]  # hall has no site pose
     assert len(page["rows"]) == len(want)
-    save_screenshot(driver, "viewer-site.png")
+    save_screenshot(driver, "viewer-site.png", capsys)
     assert console_errors(driver) == []
 
 
-def test_sample_frame_with_the_default_model(driver: Any, tmp_path_factory: pytest.TempPathFactory) -> None:
+def test_sample_frame_with_the_default_model(driver: Any, tmp_path_factory: pytest.TempPathFactory,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
     """The shipped model on a shipped sample frame: the page shows what the API answers, however many."""
     samples = sorted(SAMPLES_DIR.glob("*.jpg"))
     if not DEFAULT_MODEL_PATH.is_file() or not samples:
@@ -257,5 +259,5 @@ def test_sample_frame_with_the_default_model(driver: Any, tmp_path_factory: pyte
         answer = detect(live, samples[0].read_bytes())
         assert math.isfinite(answer["timing_ms"]["total"])
         assert_page_matches(page, answer)
-        save_screenshot(driver, "viewer-sample.png")
+        save_screenshot(driver, "viewer-sample.png", capsys)
     assert console_errors(driver) == []
