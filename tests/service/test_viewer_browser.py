@@ -17,9 +17,9 @@ from typing import Any
 import httpx
 import numpy as np
 import pytest
-from browser import chromium_driver, console_errors, save_screenshot, wait_for
 from conftest import encode, person_frame
 from live_server import LiveServer
+from viewer_browser import chromium_driver, console_errors, save_screenshot, wait_for
 
 from fisheye import FisheyeCamera, camera_to_dict
 from models import DEFAULT_MODEL_PATH
