@@ -73,8 +73,15 @@ def parse_points(text: str) -> list[list[float]]:
 
 
 def open_page(driver: Any, url: str) -> None:
+    """Load the page and wait until it has drawn its first view; fail at once on a page error."""
     driver.get(url)
-    wait_for(lambda: driver.execute_script("return document.body.dataset.state") == "ready", "the page")
+
+    def ready() -> bool:
+        errors = console_errors(driver)
+        assert errors == [], f"the page logged errors: {errors}"
+        return bool(driver.execute_script("return document.body.dataset.state") == "ready")
+
+    wait_for(ready, "the page")
 
 
 def upload(driver: Any, path: Path) -> dict[str, Any]:
@@ -171,7 +178,7 @@ WIDE_CAMERA = {
 @pytest.mark.parametrize(("camera_record", "resolution_wh"), [
     ("demo", (2048, 2048)), ("demo", (1024, 1024)), ("demo", (300, 300)),
     (WIDE_CAMERA, (2000, 1500)), (WIDE_CAMERA, (1000, 750)), (WIDE_CAMERA, (640, 480)),
-])
+], ids=["demo-2048", "demo-1024", "demo-300", "wide-2000", "wide-1000", "wide-640"])
 def test_javascript_projection_matches_python(
     driver: Any, server: LiveServer, demo_camera: FisheyeCamera, camera_record: str | dict[str, Any],
     resolution_wh: tuple[int, int],
