@@ -24,7 +24,7 @@ CHROMEDRIVER_PATHS = ("/usr/bin/chromedriver",)
 CHROMIUM_FLAGS = (
     "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
     "--disable-background-networking", "--disable-component-update", "--disable-sync",
-    "--disable-dev-shm-usage", "--window-size=1400,900", "--force-device-scale-factor=1",
+    "--disable-dev-shm-usage", "--window-size=1400,1000", "--force-device-scale-factor=1",
 )
 ARTIFACTS_DIR = Path(__file__).resolve().parents[2] / "artifacts"
 T = TypeVar("T")
