@@ -74,6 +74,7 @@ def parse_points(text: str) -> list[list[float]]:
 
 def open_page(driver: Any, url: str) -> None:
     """Load the page and wait until it has drawn its first view; fail at once on a page error."""
+    driver.get("about:blank")  # a URL differing only in its #fragment would not reload the page
     driver.get(url)
 
     def ready() -> bool:
@@ -268,3 +269,30 @@ def test_sample_frame_with_the_default_model(driver: Any, tmp_path_factory: pyte
         assert_page_matches(page, answer)
         save_screenshot(driver, "viewer-sample.png", capsys)
     assert console_errors(driver) == []
+
+
+def test_refused_frame_is_reported_and_other_cameras_open_from_the_list(
+    driver: Any, server: LiveServer, demo_camera: FisheyeCamera, tmp_path: Path,
+) -> None:
+    from selenium.webdriver.common.by import By
+
+    open_page(driver, f"{server.url}/#/camera/demo")
+    wide = tmp_path / "wide.jpg"
+    wide.write_bytes(encode(np.zeros((300, 600, 3), np.uint8)))  # not the demo camera's aspect ratio
+    driver.find_element(By.ID, "upload").send_keys(str(wide))
+    status = wait_for(lambda: driver.execute_script(
+        "const s = document.getElementById('status'); return s.classList.contains('error') && s.textContent"),
+        "the error message")
+    refused = httpx.post(f"{server.url}/v1/cameras/demo/detect", content=wide.read_bytes(), headers=JPEG)
+    assert refused.status_code == 422 and status == refused.json()["error"]["message"]
+    # The browser logs the refused request itself; nothing else went wrong.
+    assert all("/detect" in error and "422" in error for error in console_errors(driver))
+
+    other = dict(camera_to_dict(demo_camera), id="lobby")
+    assert httpx.put(f"{server.url}/v1/cameras/lobby", json=other).status_code in (200, 201)
+    answer = detect(server, encode(person_frame(demo_camera, (0.4, -2.5), (1024, 1024), 20).bgr), "lobby")
+    open_page(driver, f"{server.url}/#/camera/demo")
+    driver.find_element(By.CSS_SELECTOR, '#camera-list a[data-camera="lobby"]').click()
+    wait_for(lambda: (page_state(driver)["shown"] or "").startswith("lobby:latest:"), "the lobby camera")
+    assert driver.find_element(By.ID, "camera-title").text.startswith("lobby")
+    assert_page_matches(page_state(driver), answer)
