@@ -222,6 +222,8 @@ def test_latest_frame_from_another_client_is_shown(
 def test_site_map_shows_every_posed_camera_and_its_people(
     driver: Any, server: LiveServer, demo_camera: FisheyeCamera, capsys: pytest.CaptureFixture[str],
 ) -> None:
+    from selenium.webdriver.common.by import By
+
     annex = dict(camera_to_dict(demo_camera), id="annex", site_pose={"x_m": 9.0, "y_m": 2.0, "yaw_deg": 90.0})
     assert httpx.put(f"{server.url}/v1/cameras/annex", json=annex).status_code in (200, 201)
     unposed = dict(camera_to_dict(demo_camera), id="hall")
@@ -250,6 +252,24 @@ def test_site_map_shows_every_posed_camera_and_its_people(
     assert sorted(cameras) == ["annex", "demo"]  # hall has no site pose
     assert len(page["rows"]) == len(want)
     save_screenshot(driver, "viewer-site.png", capsys)
+
+    # "fields of view": the map widens to hold both cameras' circles (θ = min(max_theta, 85°)).
+    from selenium.webdriver.support.ui import Select
+
+    def renders() -> int:
+        return int(driver.execute_script("return window.fishlocViewer.state.renders"))
+
+    before = renders()
+    Select(driver.find_element(By.ID, "site-extent")).select_by_value("fov")
+    wait_for(lambda: renders() > before, "the redraw")
+    bounds = driver.execute_script("return JSON.parse(document.getElementById('site-map').dataset.bounds)")
+    fov_m = demo_camera.altitude_m * math.tan(math.radians(min(demo_camera.theta_max_deg, 85.0)))
+    for x, y in ((0.0, 0.0), (9.0, 2.0)):
+        assert bounds["xmin"] <= x - fov_m + 1e-9 and bounds["xmax"] >= x + fov_m - 1e-9
+        assert bounds["ymin"] <= y - fov_m + 1e-9 and bounds["ymax"] >= y + fov_m - 1e-9
+    circles = driver.execute_script("return [...document.querySelectorAll('#site-map circle.fov')]"
+                                    ".map((c) => Number(c.getAttribute('r')))")
+    assert circles == pytest.approx([fov_m, fov_m], rel=1e-12)
     assert console_errors(driver) == []
 
 

@@ -149,6 +149,19 @@ async function openCamera(id) {
 
 // ----- site map
 
+/** The site map's extent: around the cameras and people, or around every field of view. */
+function siteBounds(posed, people) {
+  const boxes = posed.map((camera) => {
+    const reach = $("site-extent").value === "fov" ? fovRadiusM(camera) : 4;
+    const { x_m: x, y_m: y } = camera.site_pose;
+    return [x - reach, x + reach, y - reach, y + reach];
+  });
+  for (const { xy: [x, y] } of people) boxes.push([x - 2, x + 2, y - 2, y + 2]);
+  if (!boxes.length) return squareBounds(0, 0, 6);
+  const [xmin, xmax, ymin, ymax] = [0, 1, 2, 3].map((k) => (k % 2 === 0 ? Math.min : Math.max)(...boxes.map((b) => b[k])));
+  return { xmin, xmax, ymin, ymax };
+}
+
 async function renderSite() {
   const posed = state.cameras.filter((camera) => camera.site_pose);
   const records = await Promise.all(posed.map((camera) => api.latest(camera.id).catch(() => null)));
@@ -164,18 +177,12 @@ async function renderSite() {
       if (xy) people.push({ xy, label: `${camera.id} #${index + 1}`, cameraId: camera.id, index });
     });
   });
-  const xs = [...posed.map((c) => c.site_pose.x_m), ...people.map((p) => p.xy[0])];
-  const ys = [...posed.map((c) => c.site_pose.y_m), ...people.map((p) => p.xy[1])];
-  const pad = 4;
-  const cx = xs.length ? (Math.min(...xs) + Math.max(...xs)) / 2 : 0;
-  const cy = ys.length ? (Math.min(...ys) + Math.max(...ys)) / 2 : 0;
-  const half = xs.length ? Math.max(Math.max(...xs) - Math.min(...xs), Math.max(...ys) - Math.min(...ys)) / 2 + pad : 6;
   drawMap($("site-map"), {
     cameras: posed.map((camera) => ({
       camera, origin: [camera.site_pose.x_m, camera.site_pose.y_m], yawDeg: camera.site_pose.yaw_deg, showRings: false,
     })),
     people,
-    bounds: squareBounds(cx, cy, half),
+    bounds: siteBounds(posed, people),
   });
   fillTable(rows);
   const withFrames = records.filter(Boolean).map((r) => r.sequence);
@@ -250,6 +257,7 @@ async function main() {
   }));
   $("show-latest").addEventListener("click", guarded(() => showLatest(state.view.id)));
   for (const id of ["rings", "map-extent"]) $(id).addEventListener("change", () => renderCamera());
+  $("site-extent").addEventListener("change", guarded(renderSite));
   const tick = guarded(poll);
   setInterval(tick, POLL_MS);
   try {
