@@ -91,8 +91,13 @@ def upload(driver: Any, path: Path) -> dict[str, Any]:
 
     before = driver.execute_script("return window.fishlocViewer.state.uploads")
     driver.find_element(By.ID, "upload").send_keys(str(path))
-    wait_for(lambda: driver.execute_script("return window.fishlocViewer.state.uploads") == before + 1,
-             f"the page to draw the detections of {path.name}")
+
+    def drawn() -> bool:
+        status = driver.find_element(By.ID, "status")
+        assert "error" not in (status.get_attribute("class") or ""), f"the page says: {status.text}"
+        return bool(driver.execute_script("return window.fishlocViewer.state.uploads") == before + 1)
+
+    wait_for(drawn, f"the page to draw the detections of {path.name}")
     return page_state(driver)
 
 
