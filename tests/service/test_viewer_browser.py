@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from conftest import encode, person_frame
 from live_server import LiveServer
-from viewer_browser import chromium_driver, console_errors, save_screenshot, wait_for
+from viewer_browser import chromium_driver, console_errors, save_screenshot, unavailable, wait_for
 
 from fisheye import FisheyeCamera, camera_to_dict
 from models import DEFAULT_MODEL_PATH
@@ -46,6 +46,15 @@ return {
     y: Number(c.dataset.y), cx: Number(c.getAttribute('cx')), cy: Number(c.getAttribute('cy'))})),
 };
 """
+
+
+def test_a_missing_browser_skips_here_but_fails_in_ci(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(pytest.fail.Exception, match="cannot run in CI: no chromium"):
+        unavailable("no chromium")
+    monkeypatch.delenv("CI")
+    with pytest.raises(pytest.skip.Exception, match="no chromium"):
+        unavailable("no chromium")
 
 
 @pytest.fixture(scope="module")
