@@ -12,7 +12,7 @@ from fastapi import FastAPI
 from service.dependencies import ServiceState
 from service.errors import install_error_handlers
 from service.middleware import RequestContextMiddleware
-from service.routes import cameras, detect, health, metrics, model
+from service.routes import cameras, detect, health, latest, metrics, model, viewer
 
 log = logging.getLogger(__name__)
 
@@ -39,7 +39,7 @@ def create_app(state: ServiceState, warm_up: bool = True) -> FastAPI:
     )
     app.state.fishloc = state
     install_error_handlers(app)
-    for module in (health, model, cameras, detect, metrics):
+    for module in (health, model, cameras, detect, latest, metrics, viewer):
         app.include_router(module.router)
     app.add_middleware(RequestContextMiddleware, metrics=state.metrics)
     return app

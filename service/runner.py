@@ -18,6 +18,7 @@ import cv2
 from fisheye import FisheyeCamera
 from service.config import Settings
 from service.frame_decode import FrameError
+from service.latest import LatestFrames
 from service.metrics import ServiceMetrics
 from service.onnx_model import OnnxModel, SessionThreads
 from service.pipeline import Pipeline, PipelineConfig
@@ -52,6 +53,7 @@ class InferenceRunner:
         self._lock = threading.Lock()
         self._in_flight = 0
         self._ready = threading.Event()
+        self.latest = LatestFrames()  # what the viewer shows: each camera's last frame, any front end
         info = pipeline.info
         labels = {"name": info.name, "version": info.version, "input_size": str(info.input_size)}
         metrics.model_info.labels(**labels).set(1)
@@ -110,6 +112,7 @@ class InferenceRunner:
             self.metrics.frame_errors.labels(code=error.code).inc()
             raise
         self.metrics.observe_result(result, frontend)
+        self.latest.record(data, result, frontend)
         return result
 
     def close(self) -> None:
