@@ -43,13 +43,14 @@ _OPENCV_DEFAULT_THREADS = cv2.getNumThreads()
 
 def staged_detect(pipeline: Pipeline, data: bytes, camera: FisheyeCamera,
                   threshold: float) -> tuple[dict[str, float], Detections]:
-    """The calls of `Pipeline.detect`, each timed: stage -> ms (STAGES), and the detections."""
+    """The calls of `Pipeline.detect`, each timed: stage -> ms (STAGES, and `decode_cpu`: the
+    decoding thread's CPU time, which other processes' load does not inflate), and the detections."""
     info = pipeline.info
-    start = time.perf_counter()
+    start, start_cpu = time.perf_counter(), time.thread_time()
     header = read_header(data)
     frame_camera = camera.scaled_to(header.size_wh)
     frame = decode_frame(data, info.input_size, pipeline.config.max_pixels, header)
-    decoded = time.perf_counter()
+    decoded, decoded_cpu = time.perf_counter(), time.thread_time()
     letterbox = Letterbox.fit(frame.frame_wh, info.input_size)
     image = dataclasses.replace(letterbox, frame_wh=frame.decoded_wh).apply(frame.rgb, info.pad_value)
     preprocessed = time.perf_counter()
@@ -62,6 +63,7 @@ def staged_detect(pipeline: Pipeline, data: bytes, camera: FisheyeCamera,
     marks = (start, decoded, preprocessed, inferred, selected, done)
     times = {stage: (b - a) * 1e3 for stage, a, b in zip(STAGES, marks, marks[1:], strict=False)}
     times["total"] = (done - start) * 1e3
+    times["decode_cpu"] = (decoded_cpu - start_cpu) * 1e3
     return times, detections
 
 
@@ -105,7 +107,11 @@ class InProcessResult:
     pipeline_ms: Summary
     naive_ms: Summary
     floor_inference_ms: Summary
+    pipeline_cpu_ms: Summary           # process CPU time of `Pipeline.detect` (all its threads)
+    decode_cpu_ms: Summary             # CPU time of the decode stage (one thread)
     detections_per_frame: float
+    decode_reduction: int              # the DCT scale the service decodes these frames at (1, 2, 4, 8)
+    decoded_wh: tuple[int, int]
 
     @property
     def floor_ms(self) -> float:
@@ -127,8 +133,12 @@ class InProcessResult:
             "pipeline_ms": self.pipeline_ms.as_dict(),
             "naive_ms": self.naive_ms.as_dict(),
             "floor_inference_ms": self.floor_inference_ms.as_dict(),
+            "pipeline_cpu_ms": self.pipeline_cpu_ms.as_dict(),
+            "decode_cpu_ms": self.decode_cpu_ms.as_dict(),
             "floor_decode_plus_inference_p50_ms": self.floor_ms,
             "detections_per_frame": self.detections_per_frame,
+            "decode_reduction": self.decode_reduction,
+            "decoded_wh": list(self.decoded_wh),
             "ratios": self.ratios(),
         }
 
@@ -137,6 +147,19 @@ def _timed(call: Callable[[], object]) -> float:
     start = time.perf_counter()
     call()
     return (time.perf_counter() - start) * 1e3
+
+
+def _timed_cpu(call: Callable[[], object]) -> tuple[float, float]:
+    """Wall and process CPU ms of one call."""
+    start, start_cpu = time.perf_counter(), time.process_time()
+    call()
+    return (time.perf_counter() - start) * 1e3, (time.process_time() - start_cpu) * 1e3
+
+
+def _settle() -> None:
+    """A pause between measurements: thread pools that busy-wait after their work (onnxruntime's
+    default session, OpenCV's pool) stop spinning before the next measurement starts."""
+    time.sleep(0.01)
 
 
 def service_pipeline(model_path: Path, threads: int) -> Pipeline:
@@ -166,6 +189,8 @@ def run_in_process(model_path: Path, frames: FrameSet, camera: FisheyeCamera, th
 
     stages: dict[str, list[float]] = {name: [] for name in STAGES}
     whole: list[float] = []
+    whole_cpu: list[float] = []
+    decode_cpu: list[float] = []
     naive_ms: list[float] = []
     floor_ms: list[float] = []
     detections = 0
@@ -173,19 +198,28 @@ def run_in_process(model_path: Path, frames: FrameSet, camera: FisheyeCamera, th
     for index in range(warmup + runs):
         data = frames.data[index % len(frames)]
         times, found = staged_detect(pipeline, data, camera, threshold)
-        whole_ms = _timed(partial(pipeline.detect, data, camera, min_score=threshold))
-        naive_time = _timed(partial(naive_detect, data))
+        _settle()
         floor_time = _timed(partial(pipeline.model.run, inputs[index % len(frames)]))
+        _settle()
+        whole_ms, whole_cpu_ms = _timed_cpu(partial(pipeline.detect, data, camera, min_score=threshold))
+        _settle()
+        naive_time = _timed(partial(naive_detect, data))
+        _settle()
         if index < warmup:
             continue
         for name in STAGES:
             stages[name].append(times[name])
         whole.append(whole_ms)
+        whole_cpu.append(whole_cpu_ms)
+        decode_cpu.append(times["decode_cpu"])
         naive_ms.append(naive_time)
         floor_ms.append(floor_time)
         detections += len(found)
+    decoded = decode_frame(frames.data[0], pipeline.info.input_size, pipeline.config.max_pixels)
     return InProcessResult(
+        decode_reduction=decoded.reduction, decoded_wh=decoded.decoded_wh,
         stages_ms={name: summarize(values) for name, values in stages.items()},
+        pipeline_cpu_ms=summarize(whole_cpu), decode_cpu_ms=summarize(decode_cpu),
         pipeline_ms=summarize(whole), naive_ms=summarize(naive_ms), floor_inference_ms=summarize(floor_ms),
         detections_per_frame=detections / runs,
     )

@@ -131,6 +131,7 @@ def check_report(report: Any) -> list[str]:
     for name, stage in (_get(report, "in_process.stages_ms") or {}).items():
         _check_summary(stage, f"in_process.stages_ms.{name}", problems)
     for dotted in ("in_process.pipeline_ms", "in_process.naive_ms", "in_process.floor_inference_ms",
+                   "in_process.pipeline_cpu_ms", "in_process.decode_cpu_ms",
                    "http.single.latency_ms", "http.concurrent.latency_ms", "grpc.latency_ms"):
         _check_summary(_get(report, dotted), dotted, problems)
     budget = report.get("budget")
@@ -171,8 +172,15 @@ def format_table(report: dict[str, Any]) -> str:
     inproc = report["sections"]["in_process"]
     if inproc["available"]:
         for name, summary in inproc["stages_ms"].items():
-            lines.append(_row(f"in-process stage: {name}", summary, f"n={summary['n']}"))
+            note = f"n={summary['n']}"
+            if name == "decode" and "decode_reduction" in inproc:
+                width, height = inproc["decoded_wh"]
+                note += f"; JPEG decoded at 1/{inproc['decode_reduction']} scale ({width}×{height})"
+            lines.append(_row(f"in-process stage: {name}", summary, note))
         lines.append(_row("in-process `Pipeline.detect`", inproc["pipeline_ms"], "the service's code path"))
+        lines.append(_row("  its CPU time (all threads)", inproc["pipeline_cpu_ms"],
+                          "CPU ms per frame; not inflated by other processes"))
+        lines.append(_row("  decode CPU time (one thread)", inproc["decode_cpu_ms"], ""))
         ratios = inproc["ratios"]
         lines.append(_row("naive pipeline", inproc["naive_ms"],
                           f"naive / service = {_ratio(ratios['naive_over_service_p50'])}"))

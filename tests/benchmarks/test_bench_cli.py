@@ -39,6 +39,7 @@ def test_tiny_bench_run_writes_its_report(double_model_path: Path, small_frames:
     # The double finds no bright blob in these frames, only its three constant boxes: one survives
     # the threshold and NMS, as in the service tests.
     assert in_process["detections_per_frame"] == 1.0
+    assert in_process["decode_reduction"] == 1 and in_process["decoded_wh"] == [256, 256]  # 256 px input
     http = sections["http"]
     assert http["available"]
     assert http["single"]["ok"] == 4 and http["single"]["errors"] == 0
