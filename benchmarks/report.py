@@ -132,6 +132,7 @@ def check_report(report: Any) -> list[str]:
         _check_summary(stage, f"in_process.stages_ms.{name}", problems)
     for dotted in ("in_process.pipeline_ms", "in_process.naive_ms", "in_process.floor_inference_ms",
                    "in_process.pipeline_cpu_ms", "in_process.decode_cpu_ms",
+                   "in_process.floor_inference_cpu_ms",
                    "http.single.latency_ms", "http.concurrent.latency_ms", "grpc.latency_ms"):
         _check_summary(_get(report, dotted), dotted, problems)
     budget = report.get("budget")
@@ -181,6 +182,9 @@ def format_table(report: dict[str, Any]) -> str:
         lines.append(_row("  its CPU time (all threads)", inproc["pipeline_cpu_ms"],
                           "CPU ms per frame; not inflated by other processes"))
         lines.append(_row("  decode CPU time (one thread)", inproc["decode_cpu_ms"], ""))
+        lines.append(_row("  inference-alone CPU time", inproc["floor_inference_cpu_ms"],
+                          "CPU overhead over decode+inference "
+                          f"{_pct(inproc['ratios'].get('service_cpu_overhead_pct_over_decode_plus_inference'))}"))
         ratios = inproc["ratios"]
         lines.append(_row("naive pipeline", inproc["naive_ms"],
                           f"naive / service = {_ratio(ratios['naive_over_service_p50'])}"))
