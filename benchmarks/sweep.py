@@ -2,8 +2,9 @@
 
 Each model (an ONNX export at some input size, FP32 or INT8) is timed in process on the same frames,
 interleaved frame by frame with the others: `Pipeline.detect` whole (the service's code path) and
-inference alone. With `--eval-data ANN.json` (unseen synthetic scenes) each model is also scored by
-`fishloc eval` (AP50), when this checkout has that command; otherwise the AP50 column says why not.
+inference alone, in wall-clock and in process CPU time (which other processes' load inflates less).
+With `--eval-data ANN.json` (unseen synthetic scenes) each model is also scored by `fishloc eval`
+(AP50), when this checkout has that command; otherwise the AP50 column says why not.
 """
 
 from __future__ import annotations
@@ -51,6 +52,8 @@ class SweepRow:
     precision: str
     pipeline_ms: Summary
     inference_ms: Summary
+    pipeline_cpu_ms: Summary
+    inference_cpu_ms: Summary
     ap50: float | None
     ap50_note: str
 
@@ -58,6 +61,8 @@ class SweepRow:
         return {"model": self.model, "name": self.name, "version": self.version,
                 "input_size": self.input_size, "precision": self.precision,
                 "pipeline_ms": self.pipeline_ms.as_dict(), "inference_ms": self.inference_ms.as_dict(),
+                "pipeline_cpu_ms": self.pipeline_cpu_ms.as_dict(),
+                "inference_cpu_ms": self.inference_cpu_ms.as_dict(),
                 "ap50": self.ap50, "ap50_note": self.ap50_note}
 
 
@@ -98,25 +103,30 @@ def run(args: argparse.Namespace) -> int:
         inputs.append(NaivePipeline.letterbox_only(frames.data[0], pipeline)[0])
     whole: list[list[float]] = [[] for _ in pipelines]
     alone: list[list[float]] = [[] for _ in pipelines]
+    whole_cpu: list[list[float]] = [[] for _ in pipelines]
+    alone_cpu: list[list[float]] = [[] for _ in pipelines]
     print(f"[bench] sweep: {len(pipelines)} models × ({args.warmup} warm-up + {args.runs}) frames, "
           "interleaved", file=sys.stderr)
     for index in range(args.warmup + args.runs):
         data = frames.data[index % len(frames)]
         for slot, pipeline in enumerate(pipelines):
-            start = time.perf_counter()
+            start, start_cpu = time.perf_counter(), time.process_time()
             pipeline.detect(data, camera)
-            middle = time.perf_counter()
+            middle, middle_cpu = time.perf_counter(), time.process_time()
             pipeline.model.run(inputs[slot])
-            end = time.perf_counter()
+            end, end_cpu = time.perf_counter(), time.process_time()
             if index >= args.warmup:
                 whole[slot].append((middle - start) * 1e3)
                 alone[slot].append((end - middle) * 1e3)
+                whole_cpu[slot].append((middle_cpu - start_cpu) * 1e3)
+                alone_cpu[slot].append((end_cpu - middle_cpu) * 1e3)
     rows = []
     for slot, (path, pipeline) in enumerate(zip(args.models, pipelines, strict=True)):
         ap50, note = evaluate_ap50(path, args.eval_data)
         info = pipeline.info
         rows.append(SweepRow(str(path), info.name, info.version, info.input_size, precision_of(path),
-                             summarize(whole[slot]), summarize(alone[slot]), ap50, note))
+                             summarize(whole[slot]), summarize(alone[slot]), summarize(whole_cpu[slot]),
+                             summarize(alone_cpu[slot]), ap50, note))
     machine = machine_info(threads)
     report = {"schema": "fishloc-bench-sweep/1", "machine": dict(machine.as_dict(), summary=machine.line()),
               "frames": {"folder": frames.folder, "count": len(frames), "width": frames.width,
@@ -127,12 +137,14 @@ def run(args: argparse.Namespace) -> int:
     args.sweep_json.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
     print(f"Machine: {machine.line()}")
     print(f"Frames: {len(frames)} × {frames.width}×{frames.height} from {frames.folder}\n")
-    print("| model | input | precision | detect p50 | detect p95 | inference p50 | AP50 |")
-    print("|---|---|---|---|---|---|---|")
+    print("| model | input | precision | detect p50 | detect p95 | inference p50 | detect CPU p50 | "
+          "inference CPU p50 | AP50 |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for row in rows:
         ap = "—" if row.ap50 is None else f"{row.ap50:.3f}"
         print(f"| {Path(row.model).name} | {row.input_size} | {row.precision} | {row.pipeline_ms.p50:.1f} | "
-              f"{row.pipeline_ms.p95:.1f} | {row.inference_ms.p50:.1f} | {ap} |")
+              f"{row.pipeline_ms.p95:.1f} | {row.inference_ms.p50:.1f} | {row.pipeline_cpu_ms.p50:.1f} | "
+              f"{row.inference_cpu_ms.p50:.1f} | {ap} |")
     notes = sorted({row.ap50_note for row in rows if row.ap50 is None})
     for note in notes:
         print(f"AP50 not measured: {note}")
