@@ -80,7 +80,7 @@ def targets(report: dict[str, Any]) -> list[dict[str, object]]:
     out.append(_target("http_p95_ms", f"HTTP end-to-end p95 ≤ {TARGET_HTTP_P95_MS:g} ms (one client)", p95,
                        None if p95 is None else p95 <= TARGET_HTTP_P95_MS))
     fps, grpc_p95 = _get(report, "grpc.throughput_fps"), _get(report, "grpc.latency_ms.p95")
-    cameras = _get(report, "grpc.cameras")
+    cameras = _get(report, "grpc.cameras") or report.get("settings", {}).get("streams")
     met = None
     if fps is not None and grpc_p95 is not None:
         met = fps >= TARGET_GRPC_FPS and grpc_p95 <= TARGET_GRPC_P95_MS
@@ -132,7 +132,7 @@ def check_report(report: Any) -> list[str]:
         _check_summary(stage, f"in_process.stages_ms.{name}", problems)
     for dotted in ("in_process.pipeline_ms", "in_process.naive_ms", "in_process.floor_inference_ms",
                    "in_process.pipeline_cpu_ms", "in_process.decode_cpu_ms",
-                   "in_process.floor_inference_cpu_ms",
+                   "in_process.floor_inference_cpu_ms", "in_process.floor_decode_ms",
                    "http.single.latency_ms", "http.concurrent.latency_ms", "grpc.latency_ms"):
         _check_summary(_get(report, dotted), dotted, problems)
     budget = report.get("budget")
@@ -188,6 +188,7 @@ def format_table(report: dict[str, Any]) -> str:
         ratios = inproc["ratios"]
         lines.append(_row("naive pipeline", inproc["naive_ms"],
                           f"naive / service = {_ratio(ratios['naive_over_service_p50'])}"))
+        lines.append(_row("floor: decode alone", inproc["floor_decode_ms"], ""))
         lines.append(_row("floor: inference alone", inproc["floor_inference_ms"],
                           f"service / floor = {_ratio(ratios['service_over_floor_inference_p50'])}; "
                           f"overhead over decode+inference "
@@ -198,7 +199,7 @@ def format_table(report: dict[str, Any]) -> str:
     if http["available"]:
         single, concurrent = http["single"], http["concurrent"]
         lines.append(_row("HTTP, 1 client", single["latency_ms"],
-                          f"{single['throughput_fps']:.1f} frames/s; server total p50 "
+                          f"{single['throughput_fps']:.1f} frames/s; pipeline total in the server p50 "
                           f"{_ms((single['server_total_ms'] or {}).get('p50'))}; overhead over "
                           f"decode+inference {_pct(http['overhead_pct_over_decode_plus_inference'])}"))
         if concurrent is not None:

@@ -42,7 +42,7 @@ def make_report(http_p95_values: tuple[float, ...] = (40.0, 50.0, 55.0)) -> dict
             "in_process": {"available": True, "stages_ms": stages, "pipeline_ms": _summary(30.0, 31.0),
                            "naive_ms": _summary(60.0), "floor_inference_ms": _summary(15.0),
                            "pipeline_cpu_ms": _summary(40.0), "decode_cpu_ms": _summary(20.0),
-                           "floor_inference_cpu_ms": _summary(15.0),
+                           "floor_inference_cpu_ms": _summary(15.0), "floor_decode_ms": _summary(20.0),
                            "ratios": {"naive_over_service_p50": 2.0, "service_over_floor_inference_p50": 2.0,
                                       "service_overhead_pct_over_decode_plus_inference": 5.0}},
             "http": {"available": True,
