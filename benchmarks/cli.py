@@ -15,7 +15,14 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from benchmarks.frames import FrameSet, FrameSpec, load_frames, make_frames
+from benchmarks.frames import (
+    FrameSet,
+    FrameSpec,
+    load_frames,
+    make_frames,
+    make_synth_frames,
+    synth_available,
+)
 from benchmarks.grpc_streams import grpc_unavailable_reason, stream_cameras
 from benchmarks.http_load import concurrent_clients, single_client
 from benchmarks.machine import load_average, machine_info, model_description
@@ -41,10 +48,14 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", type=Path, default=DEFAULT_MODEL_PATH,
                         help="ONNX model (default: the shipped default model)")
     parser.add_argument("--frames", type=Path, metavar="DIR",
-                        help="folder of JPEG/PNG frames of one size (default: procedural 2952×2952 frames, "
-                             "rendered once and cached under ~/.cache/fishloc/bench-frames)")
-    parser.add_argument("--frame-size", type=int, default=2952, help="side of the procedural frames (px)")
-    parser.add_argument("--frame-count", type=int, default=6, help="number of procedural frames")
+                        help="folder of JPEG/PNG frames of one size (default: 2952×2952 frames rendered once "
+                             "and cached under ~/.cache/fishloc/bench-frames, see --renderer)")
+    parser.add_argument("--renderer", choices=("synth", "procedural"), default=None,
+                        help="what makes the frames when no --frames is given: `fishloc synth` (the "
+                             "default where this checkout has it) or the procedural generator "
+                             "(benchmarks/frames.py)")
+    parser.add_argument("--frame-size", type=int, default=2952, help="side of the rendered frames (px)")
+    parser.add_argument("--frame-count", type=int, default=6, help="number of rendered frames")
     parser.add_argument("--camera", type=Path, default=DEMO_CAMERA_PATH,
                         help="camera file of the frames (default: the demo camera, scaled to the frames)")
     parser.add_argument("--runs", type=int, default=100, help="timed frames per measurement (default 100)")
@@ -79,6 +90,11 @@ def bench_frames(args: argparse.Namespace, progress: Any = print) -> FrameSet:
     if args.frames is not None:
         return load_frames(args.frames)
     spec = FrameSpec(size=args.frame_size, count=args.frame_count)
+    renderer = args.renderer or ("synth" if synth_available() else "procedural")
+    if renderer == "synth":
+        progress(f"frames: {spec.count} unseen {spec.size}×{spec.size} scenes by `fishloc synth` "
+                 "(rendered once, then cached; minutes on 2 cores)")
+        return load_frames(make_synth_frames(spec, camera_path=args.camera))
     progress(f"frames: rendering/caching {spec.count} procedural {spec.size}×{spec.size} JPEGs ({spec.key})")
     return load_frames(make_frames(spec))
 

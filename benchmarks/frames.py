@@ -1,5 +1,8 @@
 """Benchmark frames: JPEGs with the size, detail and file size of real overhead fisheye frames.
 
+Where the checkout has the synthetic renderer, `fishloc synth` renders them (unseen scenes through
+the demo camera; `make_synth_frames`). The procedural frames below need nothing but OpenCV.
+
 Decoding cost follows the encoded bytes (entropy decoding cannot be skipped, even at reduced DCT
 scale), so a flat test image that compresses to 100 kB would make the decoder look ten times faster
 than it is on a camera's 2 MB frame. These frames are procedural scenes seen through the demo
@@ -12,6 +15,9 @@ black outside the image circle and per-pixel sensor noise, encoded as camera fir
 from __future__ import annotations
 
 import math
+import shutil
+import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,6 +25,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from benchmarks.checkout import checkout_env, source_root
 from fisheye import FisheyeCamera, load_camera
 from models import DEMO_CAMERA_PATH
 
@@ -154,6 +161,36 @@ def make_frames(spec: FrameSpec, cache_dir: Path | None = None) -> Path:
             temporary = path.with_suffix(".tmp")
             temporary.write_bytes(encode_jpeg(render_frame(spec, index, camera), spec.jpeg_quality))
             temporary.replace(path)
+    return folder
+
+
+def synth_available() -> bool:
+    """Whether this checkout has the synthetic renderer (`fishloc synth`)."""
+    from service.cli import COMMANDS
+
+    return "synth" in COMMANDS
+
+
+def make_synth_frames(spec: FrameSpec, cache_dir: Path | None = None, camera_path: Path = DEMO_CAMERA_PATH
+                      ) -> Path:
+    """The folder of `spec.count` frames of unseen synthetic scenes rendered by `fishloc synth` (people,
+    furniture, textures, sensor noise; `annotations.json` beside them) through `camera_path`,
+    rendering them on first use. `spec.noise_sigma` is the procedural generator's and is not used."""
+    folder = (cache_dir or default_cache_dir()) / (
+        f"synth-{spec.size}px-{spec.count}f-seed{spec.seed}-q{spec.jpeg_quality}-{Path(camera_path).stem}-v1")
+    if (folder / "annotations.json").exists():
+        return folder
+    staging = folder.with_name(folder.name + ".partial")
+    shutil.rmtree(staging, ignore_errors=True)
+    command = [sys.executable, "-m", "service.cli", "synth", "--out", str(staging),
+               "--images", str(spec.count), "--size", str(spec.size), "--seed", str(spec.seed),
+               "--split", "unseen", "--camera", str(Path(camera_path).resolve()),
+               "--jpeg-quality", str(spec.jpeg_quality), "--quiet"]
+    done = subprocess.run(command, capture_output=True, text=True, check=False, cwd=source_root(),
+                          env=checkout_env())
+    if done.returncode != 0:
+        raise RuntimeError(f"fishloc synth failed ({done.returncode}): {done.stderr.strip()[-500:]}")
+    staging.replace(folder)
     return folder
 
 

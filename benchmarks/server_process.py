@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import socket
 import subprocess
 import sys
@@ -13,7 +12,7 @@ from types import TracebackType
 
 import httpx
 
-import service
+from benchmarks.checkout import checkout_env, source_root
 from fisheye import FisheyeCamera, camera_to_dict, save_camera
 
 
@@ -46,15 +45,15 @@ class ServerProcess:
         self.command = [
             sys.executable, "-m", "service.cli", "serve", "--host", "127.0.0.1",
             "--http-port", str(self.http_port), "--grpc-port", str(self.grpc_port),
-            "--model", str(model), "--cameras", str(cameras), "--database", str(root / "cameras.db"),
+            "--model", str(Path(model).resolve()), "--cameras", str(cameras),
+            "--database", str(root / "cameras.db"),
             "--no-demo-camera",
         ]
         if threads is not None:
             self.command += ["--threads", str(threads)]
         # The server runs the same checkout as the benchmark, whatever an installed copy says.
-        self.source_root = Path(service.__file__).resolve().parent.parent
-        python_path = os.pathsep.join(p for p in (str(self.source_root), os.environ.get("PYTHONPATH")) if p)
-        self.env = dict(os.environ, FISHLOC_LOG_LEVEL="warning", PYTHONPATH=python_path, **(extra_env or {}))
+        self.source_root = source_root()
+        self.env = checkout_env(dict(FISHLOC_LOG_LEVEL="warning", **(extra_env or {})))
         self.log_path = root / "server.log"
         self._process: subprocess.Popen[bytes] | None = None
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from benchmarks.checkout import checkout_env, source_root
 from benchmarks.stats import Summary, summarize
 
 QUANTIZED_OPS = frozenset({"QuantizeLinear", "DequantizeLinear", "QLinearConv", "ConvInteger"})
@@ -76,9 +77,10 @@ def evaluate_ap50(model: Path, eval_data: Path | None) -> tuple[float | None, st
         return None, "`fishloc eval` is not in this checkout (detector branch not merged)"
     with tempfile.TemporaryDirectory() as folder:
         out = Path(folder) / "eval.json"
-        command = [sys.executable, "-m", "service.cli", "eval", "--model", str(model),
-                   "--data", str(eval_data), "--json", str(out)]
-        done = subprocess.run(command, capture_output=True, text=True, check=False)
+        command = [sys.executable, "-m", "service.cli", "eval", "--model", str(model.resolve()),
+                   "--data", str(eval_data.resolve()), "--json", str(out)]
+        done = subprocess.run(command, capture_output=True, text=True, check=False, cwd=source_root(),
+                              env=checkout_env())
         if done.returncode != 0 or not out.exists():
             return None, f"fishloc eval failed ({done.returncode}): {done.stderr.strip()[-300:]}"
         metrics = json.loads(out.read_text(encoding="utf-8"))

@@ -71,3 +71,18 @@ def test_load_frames_refuses_empty_and_mixed_folders(tmp_path: Path) -> None:
 def test_frame_spec_refuses_nonsense(kwargs: dict[str, float]) -> None:
     with pytest.raises(ValueError):
         FrameSpec(**kwargs)  # type: ignore[arg-type]
+
+
+def test_synth_frames_are_rendered_once(tmp_path: Path) -> None:
+    from benchmarks.frames import make_synth_frames, synth_available
+
+    if not synth_available():
+        pytest.skip("this checkout has no `fishloc synth`")
+    spec = FrameSpec(size=192, count=1, jpeg_quality=90)
+    folder = make_synth_frames(spec, tmp_path)
+    frames = load_frames(folder)
+    assert (frames.width, frames.height, len(frames)) == (192, 192, 1)
+    assert (folder / "annotations.json").exists()
+    stamp = (folder / frames.names[0]).stat().st_mtime_ns
+    assert make_synth_frames(spec, tmp_path) == folder
+    assert (folder / frames.names[0]).stat().st_mtime_ns == stamp
