@@ -14,6 +14,7 @@ from collections.abc import Sequence
 
 # name -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
+    "bench": ("benchmarks.cli", "latency and throughput on realistic frames (in process, HTTP, gRPC)"),
     "calibrate": ("fisheye.calibrate_cli", "fit a camera's lens from ruler marks, or import OpenCV K/D"),
     "serve": ("service.serve_cli", "serve the model over REST and gRPC (default model, demo camera)"),
     "gateway": ("service.gateway_cli", "stream a camera's frames to a server over gRPC, print the answers"),

@@ -47,10 +47,17 @@ class ModelInfo:
 
 @dataclass(frozen=True)
 class SessionThreads:
-    """onnxruntime thread counts: `intra_op` threads within an operator, `inter_op` across them."""
+    """onnxruntime thread counts: `intra_op` threads within an operator, `inter_op` across them.
+
+    `allow_spinning` lets idle pool threads busy-wait for the next operator (onnxruntime's default).
+    Off here: on a few shared cores the spinning threads take the CPU from the JPEG decode of the
+    next frame and from other processes; `fishloc bench` measured 1.5-2x higher latency with it on
+    a 2-core machine (README, Benchmark).
+    """
 
     intra_op: int
     inter_op: int = 1
+    allow_spinning: bool = False
 
     def __post_init__(self) -> None:
         if self.intra_op < 1 or self.inter_op < 1:
@@ -120,6 +127,9 @@ class OnnxModel:
         options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
         options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
         options.log_severity_level = 3
+        spinning = "1" if threads.allow_spinning else "0"
+        options.add_session_config_entry("session.intra_op.allow_spinning", spinning)
+        options.add_session_config_entry("session.inter_op.allow_spinning", spinning)
         try:
             self.session = ort.InferenceSession(
                 data, sess_options=options, providers=["CPUExecutionProvider"]

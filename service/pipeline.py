@@ -121,6 +121,12 @@ class Pipeline:
 
     def _postprocess(self, boxes_input: NDArray[np.float32], scores: NDArray[np.float32], threshold: float,
                      letterbox: Letterbox, camera: FisheyeCamera) -> Detections:
+        return localize(*self.select(boxes_input, scores, threshold, letterbox, camera), camera)
+
+    def select(self, boxes_input: NDArray[np.float32], scores: NDArray[np.float32], threshold: float,
+               letterbox: Letterbox, camera: FisheyeCamera) -> tuple[FloatArray, FloatArray]:
+        """Model outputs -> the kept boxes (M, 4) in frame px and their scores (M,): score threshold,
+        finite positive boxes, rotated NMS about `camera`'s principal point, at most max_detections."""
         boxes = boxes_input.astype(np.float64)
         score = scores.astype(np.float64)
         keep = (
@@ -131,5 +137,5 @@ class Pipeline:
         score = score[keep]
         pp = np.asarray(camera.principal_point, dtype=np.float64)
         kept = rotated_nms(boxes_frame, score, pp, self.config.nms_iou)[: self.config.max_detections]
-        return localize(boxes_frame[kept], score[kept], camera)
+        return boxes_frame[kept], score[kept]
 

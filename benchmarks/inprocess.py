@@ -1,0 +1,244 @@
+"""Section 1: the pipeline in this process, stage by stage, beside a naive pipeline and the floor.
+
+Three ways of answering the same frames, interleaved frame by frame so that load from other jobs on
+a shared machine hits them alike and their ratios stay meaningful:
+
+- *service*: `Pipeline.detect` as `fishloc serve` builds it (`build_runner`: its session options,
+  thread counts and OpenCV threading), timed whole, and the same calls timed stage by stage:
+  decode (header + reduced-scale JPEG decode), preprocess (letterbox), inference (onnxruntime),
+  postprocess (threshold, boxes to frame px, rotated NMS), localization (foot points, floor, site).
+- *naive*: full-size `cv2.imdecode`, `cv2.resize`, onnxruntime with default session options, then
+  the same post-processing: what a first attempt would do.
+- *floor*: model inference alone on an input decoded and letterboxed beforehand, and the decode
+  alone; their sum is what any service must spend on a frame, and the service's overhead is
+  measured over it (in wall-clock and, less sensitive to other processes, in CPU time).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
+
+import cv2
+import numpy as np
+import onnxruntime as ort
+from numpy.typing import NDArray
+
+from benchmarks.frames import FrameSet
+from benchmarks.stats import Summary, overhead_pct, ratio, summarize
+from fisheye import FisheyeCamera, Letterbox
+from service.config import Settings
+from service.frame_decode import decode_frame, read_header
+from service.metrics import ServiceMetrics
+from service.pipeline import Pipeline, localize
+from service.result import Detections
+from service.runner import build_runner
+
+STAGES = ("decode", "preprocess", "inference", "postprocess", "localization", "total")
+# OpenCV's own thread count before the service's set-up lowers it (the naive pipeline keeps it).
+_OPENCV_DEFAULT_THREADS = cv2.getNumThreads()
+
+
+def staged_detect(pipeline: Pipeline, data: bytes, camera: FisheyeCamera,
+                  threshold: float) -> tuple[dict[str, float], Detections]:
+    """The calls of `Pipeline.detect`, each timed: stage -> ms (STAGES, and `decode_cpu`: the
+    decoding thread's CPU time, which other processes' load does not inflate), and the detections."""
+    info = pipeline.info
+    start, start_cpu = time.perf_counter(), time.thread_time()
+    header = read_header(data)
+    frame_camera = camera.scaled_to(header.size_wh)
+    frame = decode_frame(data, info.input_size, pipeline.config.max_pixels, header)
+    decoded, decoded_cpu = time.perf_counter(), time.thread_time()
+    letterbox = Letterbox.fit(frame.frame_wh, info.input_size)
+    image = dataclasses.replace(letterbox, frame_wh=frame.decoded_wh).apply(frame.rgb, info.pad_value)
+    preprocessed = time.perf_counter()
+    boxes_input, scores = pipeline.model.run(image)
+    inferred = time.perf_counter()
+    boxes_frame, kept_scores = pipeline.select(boxes_input, scores, threshold, letterbox, frame_camera)
+    selected = time.perf_counter()
+    detections = localize(boxes_frame, kept_scores, frame_camera)
+    done = time.perf_counter()
+    marks = (start, decoded, preprocessed, inferred, selected, done)
+    times = {stage: (b - a) * 1e3 for stage, a, b in zip(STAGES, marks, marks[1:], strict=False)}
+    times["total"] = (done - start) * 1e3
+    times["decode_cpu"] = (decoded_cpu - start_cpu) * 1e3
+    return times, detections
+
+
+class NaivePipeline:
+    """Full decode, plain resize, a default onnxruntime session; the service's post-processing."""
+
+    def __init__(self, model_path: str | Path, pipeline: Pipeline) -> None:
+        self.session = ort.InferenceSession(str(model_path), providers=["CPUExecutionProvider"])
+        self.pipeline = pipeline
+
+    def letterboxed(self, data: bytes) -> tuple[NDArray[np.uint8], Letterbox]:
+        return self.letterbox_only(data, self.pipeline)
+
+    @staticmethod
+    def letterbox_only(data: bytes, pipeline: Pipeline) -> tuple[NDArray[np.uint8], Letterbox]:
+        """Full decode and plain resize of `data` to `pipeline`'s input: (S, S, 3) RGB, its letterbox."""
+        bgr = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise ValueError("OpenCV cannot decode the frame")
+        rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+        info = pipeline.info
+        letterbox = Letterbox.fit((rgb.shape[1], rgb.shape[0]), info.input_size)
+        resized = cv2.resize(rgb, letterbox.resized_wh)
+        canvas = np.full((info.input_size, info.input_size, 3), info.pad_value, dtype=np.uint8)
+        x0, y0 = letterbox.offset_xy
+        canvas[y0:y0 + resized.shape[0], x0:x0 + resized.shape[1]] = resized
+        return canvas, letterbox
+
+    def detect(self, data: bytes, camera: FisheyeCamera, threshold: float) -> Detections:
+        image, letterbox = self.letterboxed(data)
+        boxes, scores = self.session.run(["boxes", "scores"], {"image": image[None]})
+        frame_camera = camera.scaled_to(letterbox.frame_wh)
+        kept = self.pipeline.select(np.asarray(boxes[0], np.float32), np.asarray(scores[0], np.float32),
+                                    threshold, letterbox, frame_camera)
+        return localize(*kept, frame_camera)
+
+
+@dataclass(frozen=True)
+class InProcessResult:
+    stages_ms: dict[str, Summary]
+    pipeline_ms: Summary
+    naive_ms: Summary
+    floor_inference_ms: Summary
+    floor_decode_ms: Summary           # decode alone (header + reduced-scale decode), its own slot
+    pipeline_cpu_ms: Summary           # process CPU time of `Pipeline.detect` (all its threads)
+    decode_cpu_ms: Summary             # CPU time of the decode stage (one thread)
+    floor_inference_cpu_ms: Summary    # process CPU time of inference alone
+    detections_per_frame: float
+    decode_reduction: int              # the DCT scale the service decodes these frames at (1, 2, 4, 8)
+    decoded_wh: tuple[int, int]
+
+    @property
+    def floor_ms(self) -> float:
+        """decode alone + inference alone (p50): what any service must spend on a frame."""
+        return self.floor_decode_ms.p50 + self.floor_inference_ms.p50
+
+    def ratios(self) -> dict[str, float | None]:
+        return {
+            "naive_over_service_p50": ratio(self.naive_ms.p50, self.pipeline_ms.p50),
+            "service_over_floor_inference_p50": ratio(self.pipeline_ms.p50, self.floor_inference_ms.p50),
+            "service_overhead_pct_over_decode_plus_inference": overhead_pct(self.pipeline_ms.p50,
+                                                                             self.floor_ms),
+            # The same on CPU time, which the load of other processes inflates far less.
+            "service_cpu_overhead_pct_over_decode_plus_inference": overhead_pct(
+                self.pipeline_cpu_ms.p50, self.decode_cpu_ms.p50 + self.floor_inference_cpu_ms.p50),
+        }
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "available": True,
+            "stages_ms": {name: s.as_dict() for name, s in self.stages_ms.items()},
+            "pipeline_ms": self.pipeline_ms.as_dict(),
+            "naive_ms": self.naive_ms.as_dict(),
+            "floor_inference_ms": self.floor_inference_ms.as_dict(),
+            "floor_decode_ms": self.floor_decode_ms.as_dict(),
+            "pipeline_cpu_ms": self.pipeline_cpu_ms.as_dict(),
+            "decode_cpu_ms": self.decode_cpu_ms.as_dict(),
+            "floor_inference_cpu_ms": self.floor_inference_cpu_ms.as_dict(),
+            "floor_decode_plus_inference_p50_ms": self.floor_ms,
+            "detections_per_frame": self.detections_per_frame,
+            "decode_reduction": self.decode_reduction,
+            "decoded_wh": list(self.decoded_wh),
+            "ratios": self.ratios(),
+        }
+
+
+def _timed(call: Callable[[], object]) -> float:
+    start = time.perf_counter()
+    call()
+    return (time.perf_counter() - start) * 1e3
+
+
+def _timed_cpu(call: Callable[[], object]) -> tuple[float, float]:
+    """Wall and process CPU ms of one call."""
+    start, start_cpu = time.perf_counter(), time.process_time()
+    call()
+    return (time.perf_counter() - start) * 1e3, (time.process_time() - start_cpu) * 1e3
+
+
+def _settle(seconds: float = 0.01) -> None:
+    """A pause between measurements: thread pools that busy-wait after their work (onnxruntime's
+    default session, OpenCV's pool) stop spinning before the next measurement starts."""
+    time.sleep(seconds)
+
+
+def service_pipeline(model_path: Path, threads: int) -> Pipeline:
+    """The pipeline exactly as `fishloc serve --model model_path --threads threads` builds it."""
+    runner = build_runner(Settings(model=model_path, threads=threads), ServiceMetrics())
+    runner.close()  # only its pipeline is used; the runner's pool would sit idle
+    return runner.pipeline
+
+
+def run_in_process(model_path: Path, frames: FrameSet, camera: FisheyeCamera, threads: int,
+                   runs: int, warmup: int, progress: Callable[[str], None] = print) -> InProcessResult:
+    pipeline = service_pipeline(model_path, threads)
+    naive = NaivePipeline(model_path, pipeline)
+    info = pipeline.info
+    threshold = info.default_min_score
+    inputs = []
+    for data in frames.data:
+        image, _ = naive.letterboxed(data)
+        inputs.append(image)
+    service_threads = cv2.getNumThreads()
+
+    def naive_detect(data: bytes) -> None:
+        cv2.setNumThreads(_OPENCV_DEFAULT_THREADS)
+        try:
+            naive.detect(data, camera, threshold)
+        finally:
+            cv2.setNumThreads(service_threads)
+
+    stages: dict[str, list[float]] = {name: [] for name in STAGES}
+    whole: list[float] = []
+    whole_cpu: list[float] = []
+    decode_cpu: list[float] = []
+    floor_cpu: list[float] = []
+    floor_decode: list[float] = []
+    naive_ms: list[float] = []
+    floor_ms: list[float] = []
+    detections = 0
+    progress(f"in-process: {warmup} warm-up + {runs} interleaved runs of service, staged, naive and floor")
+    for index in range(warmup + runs):
+        data = frames.data[index % len(frames)]
+        # The naive session's pool spins after its runs (onnxruntime's default): it goes first and
+        # gets the longest pause, so that its spinning does not land on the service's figures.
+        naive_time = _timed(partial(naive_detect, data))
+        _settle(0.05)
+        times, found = staged_detect(pipeline, data, camera, threshold)
+        _settle()
+        decode_time = _timed(partial(decode_frame, data, info.input_size, pipeline.config.max_pixels))
+        _settle()
+        floor_time, floor_cpu_ms = _timed_cpu(partial(pipeline.model.run, inputs[index % len(frames)]))
+        _settle()
+        whole_ms, whole_cpu_ms = _timed_cpu(partial(pipeline.detect, data, camera, min_score=threshold))
+        _settle()
+        if index < warmup:
+            continue
+        for name in STAGES:
+            stages[name].append(times[name])
+        whole.append(whole_ms)
+        whole_cpu.append(whole_cpu_ms)
+        decode_cpu.append(times["decode_cpu"])
+        floor_cpu.append(floor_cpu_ms)
+        floor_decode.append(decode_time)
+        naive_ms.append(naive_time)
+        floor_ms.append(floor_time)
+        detections += len(found)
+    decoded = decode_frame(frames.data[0], pipeline.info.input_size, pipeline.config.max_pixels)
+    return InProcessResult(
+        decode_reduction=decoded.reduction, decoded_wh=decoded.decoded_wh,
+        stages_ms={name: summarize(values) for name, values in stages.items()},
+        pipeline_cpu_ms=summarize(whole_cpu), decode_cpu_ms=summarize(decode_cpu),
+        floor_inference_cpu_ms=summarize(floor_cpu), floor_decode_ms=summarize(floor_decode),
+        pipeline_ms=summarize(whole), naive_ms=summarize(naive_ms), floor_inference_ms=summarize(floor_ms),
+        detections_per_frame=detections / runs,
+    )
