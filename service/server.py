@@ -16,8 +16,10 @@ from service.app import create_app
 from service.cameras import CameraRegistry
 from service.config import Settings
 from service.dependencies import ServiceState
+from service.http_protocol import head_deadline_protocol
 from service.metrics import ServiceMetrics
 from service.runner import build_runner
+from service.tls import TlsFiles, tls_from_settings
 
 log = logging.getLogger(__name__)
 
@@ -49,6 +51,7 @@ class Service:
         self.warm_up = warm_up
         self._http: uvicorn.Server | None = None
         self._http_task: asyncio.Task[None] | None = None
+        self.tls: TlsFiles | None = None
 
     @property
     def http_port(self) -> int:
@@ -59,9 +62,14 @@ class Service:
 
     async def start(self) -> None:
         settings = self.state.settings
+        self.tls = tls_from_settings(settings)  # TlsError before anything listens
         config = uvicorn.Config(
             create_app(self.state, warm_up=self.warm_up), host=settings.host, port=settings.http_port,
             log_config=None, access_log=False, lifespan="on", timeout_graceful_shutdown=30,
+            http=head_deadline_protocol(settings.head_timeout_s),
+            timeout_keep_alive=settings.keep_alive_timeout_s,
+            ssl_certfile=self.tls.cert_path if self.tls else None,
+            ssl_keyfile=self.tls.key_path if self.tls else None,
         )
         self._http = uvicorn.Server(config)
         self._http_task = asyncio.create_task(self._http.serve())
@@ -70,7 +78,8 @@ class Service:
                 await self._http_task  # raises what made start-up fail
                 raise RuntimeError(f"the HTTP server did not start on {settings.host}:{settings.http_port}")
             await asyncio.sleep(0.01)
-        log.info("REST listening on http://%s:%d", settings.host, self.http_port)
+        scheme = "https" if self.tls else "http"
+        log.info("REST listening on %s://%s:%d", scheme, settings.host, self.http_port)
 
     async def wait(self) -> None:
         """Until the HTTP server exits (SIGINT/SIGTERM in the main thread, or `stop`)."""

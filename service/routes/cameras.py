@@ -12,6 +12,7 @@ from fisheye import CalibrationError, FisheyeCamera, camera_to_dict
 from fisheye.camera import CAMERA_ID_PATTERN
 from service.dependencies import State, WriteAccess
 from service.errors import ApiError
+from service.request_body import BodyLimits, read_body
 from service.schemas import CameraList, error_responses
 
 router = APIRouter(tags=["cameras"])
@@ -52,13 +53,13 @@ async def get_camera(state: State, camera_id: str = CameraId) -> dict[str, Any]:
 )
 async def put_camera(request: Request, response: Response, state: State,
                      camera_id: str = CameraId) -> dict[str, Any]:
-    body = await request.body()
-    if len(body) > _MAX_RECORD_BYTES:
-        raise ApiError(413, "payload_too_large", f"a camera record is at most {_MAX_RECORD_BYTES} bytes")
+    body = await read_body(request, BodyLimits(_MAX_RECORD_BYTES, state.settings.body_timeout_s))
     try:
         record = json.loads(body)
-    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+    except ValueError as error:  # JSONDecodeError, UnicodeDecodeError, an int of too many digits
         raise ApiError(400, "bad_json", f"the body is not JSON: {error}") from None
+    except RecursionError:
+        raise ApiError(400, "bad_json", "the body is not a camera record: JSON nested too deeply") from None
     if not isinstance(record, dict):
         raise ApiError(422, "invalid_camera", "the body must be a JSON object (a camera record)")
     try:
