@@ -20,6 +20,7 @@ FRAME_ERROR_STATUS = {
     "unsupported_image": 415,
     "image_too_large": 413,
     "frame_size_mismatch": 422,
+    "frame_too_small": 422,
 }
 
 _STATUS_CODES = {
