@@ -254,7 +254,31 @@ class Scenario:
     status: int | None = None  # the HTTP status the test asserts, where there is one
 
 
+T = "tests/reliability/"
+
 SCENARIOS: list[Scenario] = [
+    Scenario("slow_body", "timeouts", "headers sent, then 100 of 100000 body bytes, then nothing "
+             "(body deadline 1 s in the test, 30 s by default)",
+             "408 `request_timeout`, `Connection: close`; a good frame sent meanwhile by another client: 200",
+             T + "test_timeouts.py::test_slow_body_gets_408_and_others_are_served", 408),
+    Scenario("trickled_body", "timeouts", "body sent one byte every 50 ms (never idle, never complete)",
+             "408 `request_timeout` once the whole-body deadline passes; next good frame 200",
+             T + "test_timeouts.py::test_trickled_body_gets_408", 408),
+    Scenario("slow_camera_record", "timeouts", "PUT whose JSON body stops half way",
+             "408 `request_timeout`; nothing written",
+             T + "test_timeouts.py::test_slow_camera_record_gets_408", 408),
+    Scenario("slow_head", "timeouts", "connection opened and silent, or request line and half the headers "
+             "(head deadline 1 s in the test, 10 s by default)",
+             "408 `request_timeout` written by the HTTP protocol, connection closed; other clients served",
+             T + "test_timeouts.py::test_slow_or_silent_head_gets_408", 408),
+    Scenario("idle_keep_alive", "timeouts", "keep-alive connection left idle after an answer",
+             "closed by the server after FISHLOC_KEEP_ALIVE_TIMEOUT_S (1 s in the test, 5 s by default)",
+             T + "test_timeouts.py::test_idle_keep_alive_connection_is_closed"),
+    Scenario("concurrent_put_delete", "registry", "3 clients send 40 frames each to camera `flip` while "
+             "a 4th replaces it (altitude 2 m / 4 m) and deletes it, 60 writes",
+             "every frame answered: 200 with positions of exactly one of the two altitudes, or 404 "
+             "`camera_not_found`, or 503 with Retry-After; no 5xx; writes 200/201/204/404",
+             T + "test_concurrency.py::test_put_and_delete_while_frames_are_in_flight"),
 ]
 SCENARIO = {row.name: row for row in SCENARIOS}
 

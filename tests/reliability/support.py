@@ -12,13 +12,20 @@ import contextlib
 import http.client
 import importlib.util
 import json
+import os
+import re
+import signal
+import subprocess
 import sys
+import threading
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-SERVICE_TESTS = Path(__file__).resolve().parents[1] / "service"
+REPO_ROOT = Path(__file__).resolve().parents[2]
+SERVICE_TESTS = REPO_ROOT / "tests" / "service"
 if str(SERVICE_TESTS) not in sys.path:
     sys.path.insert(0, str(SERVICE_TESTS))
 
@@ -44,7 +51,10 @@ _service = _service_conftest()
 person_frame = _service.person_frame
 encode = _service.encode
 
-__all__ = ["LiveServer", "RawResponse", "encode", "person_frame", "raw_request", "test_settings"]
+_LISTENING_RE = re.compile(r"REST listening on (https?)://[^:]+:(\d+)")
+
+__all__ = ["LiveServer", "RawResponse", "ServeProcess", "encode", "person_frame", "raw_request", "serve_args",
+           "test_settings", "vm_rss_kib"]
 
 
 
@@ -118,3 +128,102 @@ def raw_request(base_url: str, method: str, path: str, body: bytes = b"",
     if answer_headers.get("content-type", "").startswith("application/json"):
         parsed = json.loads(data)
     return RawResponse(response.status, answer_headers, data, parsed)
+
+
+class ServeProcess:
+    """`fishloc serve` in a child process (what an operator runs), its log lines collected.
+
+    `start()` waits for the "REST listening" line and reads the port from it; `pid` is the server
+    process (for /proc/PID/status and kill -9).
+    """
+
+    def __init__(self, args: list[str], env: dict[str, str] | None = None) -> None:
+        self.args = args
+        self.env = env or {}
+        self.lines: list[str] = []
+        self.process: subprocess.Popen[str] | None = None
+        self.url = ""
+        self._reader: threading.Thread | None = None
+        self._listening = threading.Event()
+
+    @property
+    def pid(self) -> int:
+        assert self.process is not None
+        return self.process.pid
+
+    def _read(self) -> None:
+        assert self.process is not None and self.process.stderr is not None
+        for line in self.process.stderr:
+            self.lines.append(line)
+            found = _LISTENING_RE.search(line)
+            if found:
+                self.url = f"{found.group(1)}://127.0.0.1:{found.group(2)}"
+                self._listening.set()
+        self._listening.set()  # the process ended
+
+    def start(self, timeout_s: float = 60) -> ServeProcess:
+        env = {**os.environ, "PYTHONPATH": str(REPO_ROOT), "FISHLOC_LOG_JSON": "true", **self.env}
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "service.cli", "serve", *self.args], cwd=REPO_ROOT, env=env,
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        )
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+        if not self._listening.wait(timeout_s) or not self.url:
+            self.stop()
+            raise RuntimeError("fishloc serve did not start:\n" + "".join(self.lines[-30:]))
+        return self
+
+    def wait_ready(self, timeout_s: float = 60) -> None:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            with contextlib.suppress(OSError):
+                if raw_request(self.url, "GET", "/readyz", timeout_s=5).status == 200:
+                    return
+            time.sleep(0.05)
+        raise TimeoutError("fishloc serve did not become ready")
+
+    def kill(self) -> None:
+        """SIGKILL: no shutdown code runs."""
+        assert self.process is not None
+        self.process.send_signal(signal.SIGKILL)
+        self.process.wait(30)
+        if self._reader is not None:
+            self._reader.join(30)
+
+    def stop(self) -> int:
+        """SIGTERM, then the exit status."""
+        assert self.process is not None
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGTERM)
+        try:
+            code = self.process.wait(60)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            code = self.process.wait(30)
+        if self._reader is not None:
+            self._reader.join(30)
+        return code
+
+    @property
+    def log(self) -> str:
+        return "".join(self.lines)
+
+    def __enter__(self) -> ServeProcess:
+        return self.start()
+
+    def __exit__(self, *_exc: Any) -> None:
+        self.stop()
+
+
+def serve_args(model_path: Path, database: Path, *extra: str) -> list[str]:
+    return ["--model", str(model_path), "--database", str(database), "--http-port", "0",
+            "--grpc-port", "-1", "--threads", "1", *extra]
+
+
+def vm_rss_kib(pid: int) -> int:
+    """Resident memory of a process (VmRSS of /proc/PID/status), KiB."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1])
+    raise RuntimeError(f"no VmRSS for process {pid}")
