@@ -279,6 +279,30 @@ SCENARIOS: list[Scenario] = [
              "every frame answered: 200 with positions of exactly one of the two altitudes, or 404 "
              "`camera_not_found`, or 503 with Retry-After; no 5xx; writes 200/201/204/404",
              T + "test_concurrency.py::test_put_and_delete_while_frames_are_in_flight"),
+    Scenario("token_wrong", "access", "registry writes with tokens of 1 character, the token minus or "
+             "plus a character, 4 kB",
+             "401 `unauthorized` + `WWW-Authenticate: Bearer`; each one compared by hmac.compare_digest "
+             "against the configured token",
+             T + "test_access.py::test_tokens_are_compared_with_compare_digest", 401),
+    Scenario("detect_token", "access", "FISHLOC_DETECT_TOKEN set: detection without, with a wrong, or with "
+             "a non-Bearer token", "401 `unauthorized`; the detect token and the API token both detect "
+             "(200); the detect token cannot write the registry (401); without FISHLOC_DETECT_TOKEN "
+             "detection is open", T + "test_access.py::test_detect_token", 401),
+    Scenario("token_not_logged", "access", "`fishloc serve` at debug level; writes and detections with "
+             "right, wrong and near-miss tokens", "neither token (nor a near miss of it) appears anywhere "
+             "in the server's log", T + "test_access.py::test_tokens_never_reach_the_log"),
+    Scenario("tls_rest", "access", "FISHLOC_TLS_CERT/KEY set to a self-signed certificate (made with "
+             "`cryptography`)", "HTTPS detection 200 for a client verifying against that certificate; a "
+             "client without it fails the handshake; plain HTTP to the port fails",
+             T + "test_access.py::test_rest_over_tls", 200),
+    Scenario("tls_bad_files", "access", "certificate missing, key of another certificate, certificate "
+             "without key", "start-up stops: exit status 2 and `cannot read the TLS certificate ...`, "
+             "`... does not fit the certificate ...`, `tls_cert and tls_key go together`",
+             T + "test_access.py::test_tls_files_are_checked_at_start", 2),
+    Scenario("cors", "access", "browser preflight and GET with an Origin header",
+             "no CORS headers at all by default (preflight 405); with FISHLOC_CORS_ORIGINS the listed "
+             "origin is allowed (200, Access-Control-Allow-Origin), others refused (400)",
+             T + "test_access.py::test_cors_is_off_unless_configured"),
 ]
 SCENARIO = {row.name: row for row in SCENARIOS}
 

@@ -188,8 +188,13 @@ class ServeProcess:
         assert self.process is not None
         self.process.send_signal(signal.SIGKILL)
         self.process.wait(30)
+        self._close_pipe()
+
+    def _close_pipe(self) -> None:
         if self._reader is not None:
             self._reader.join(30)
+        if self.process is not None and self.process.stderr is not None:
+            self.process.stderr.close()
 
     def stop(self) -> int:
         """SIGTERM, then the exit status."""
@@ -201,8 +206,7 @@ class ServeProcess:
         except subprocess.TimeoutExpired:
             self.process.kill()
             code = self.process.wait(30)
-        if self._reader is not None:
-            self._reader.join(30)
+        self._close_pipe()
         return code
 
     @property
