@@ -1,5 +1,5 @@
-"""Every bad-input case of cases.py against a real server: the answer expected, then proof that the
-server is unharmed (the next good frame is answered with the person at the right place)."""
+"""Every bad-input case of reliability_cases.py against a real server: the answer expected, then
+proof that the server is unharmed (the next good frame gets the person at the right place)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cases import ALL_CASES, JPEG, MAX_BODY_BYTES, MAX_PIXELS, HttpCase
-from samples import PERSON_FLOOR_XY_M, Samples
-from support import LiveServer, RawResponse, raw_request, test_settings
+from reliability_cases import ALL_CASES, JPEG, MAX_BODY_BYTES, MAX_PIXELS, HttpCase
+from reliability_samples import PERSON_FLOOR_XY_M, Samples
+from reliability_support import LiveServer, RawResponse, raw_request, test_settings
 
 from fisheye import FisheyeCamera
 

@@ -7,9 +7,9 @@ import socket
 from collections.abc import Callable, Iterator
 
 import pytest
-from cases import JPEG, SCENARIO
-from samples import Samples
-from support import LiveServer, raw_request
+from reliability_cases import JPEG, SCENARIO
+from reliability_samples import Samples
+from reliability_support import LiveServer, raw_request
 
 from fisheye import FisheyeCamera
 from service.config import Settings

@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 from PIL import Image
-from support import encode, person_frame
+from reliability_support import encode, person_frame
 
 from fisheye import FisheyeCamera
 

@@ -14,13 +14,13 @@ from pathlib import Path
 
 import httpx
 import pytest
-from cases import SCENARIO
 from cryptography import x509
 from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import NameOID
-from samples import Samples
-from support import LiveServer, ServeProcess, serve_args
+from reliability_cases import SCENARIO
+from reliability_samples import Samples
+from reliability_support import LiveServer, ServeProcess, serve_args
 
 import service.dependencies
 from fisheye import FisheyeCamera, camera_to_dict

@@ -1,6 +1,6 @@
 """Every bad-input case of the REST API and what the server answers: the one list that the tests
-run (test_bad_input.py) and that docs/RELIABILITY.md's table is made from (`python
-tests/reliability/cases.py` prints it; test_reliability_doc.py checks the document against it).
+run (test_reliability_bad_input.py) and that docs/RELIABILITY.md's table is made from (`python
+tests/reliability/reliability_cases.py` prints it; test_reliability_doc.py checks the document).
 
 A case is one HTTP request against a test server (demo camera, body limit 1 MiB, pixel limit 9 Mpx)
 and the answer expected: status, error code and a fragment of the message. After every case the
@@ -13,7 +13,7 @@ import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from samples import Samples, jpeg_claiming, png_claiming, png_zero_bomb
+from reliability_samples import Samples, jpeg_claiming, png_claiming, png_zero_bomb
 
 MAX_BODY_BYTES = 1024 * 1024
 MAX_PIXELS = 9_000_000
@@ -260,55 +260,55 @@ SCENARIOS: list[Scenario] = [
     Scenario("slow_body", "timeouts", "headers sent, then 100 of 100000 body bytes, then nothing "
              "(body deadline 1 s in the test, 30 s by default)",
              "408 `request_timeout`, `Connection: close`; a good frame sent meanwhile by another client: 200",
-             T + "test_timeouts.py::test_slow_body_gets_408_and_others_are_served", 408),
+             T + "test_reliability_timeouts.py::test_slow_body_gets_408_and_others_are_served", 408),
     Scenario("trickled_body", "timeouts", "body sent one byte every 50 ms (never idle, never complete)",
              "408 `request_timeout` once the whole-body deadline passes; next good frame 200",
-             T + "test_timeouts.py::test_trickled_body_gets_408", 408),
+             T + "test_reliability_timeouts.py::test_trickled_body_gets_408", 408),
     Scenario("slow_camera_record", "timeouts", "PUT whose JSON body stops half way",
              "408 `request_timeout`; nothing written",
-             T + "test_timeouts.py::test_slow_camera_record_gets_408", 408),
+             T + "test_reliability_timeouts.py::test_slow_camera_record_gets_408", 408),
     Scenario("slow_head", "timeouts", "connection opened and silent, or request line and half the headers "
              "(head deadline 1 s in the test, 10 s by default)",
              "408 `request_timeout` written by the HTTP protocol, connection closed; other clients served",
-             T + "test_timeouts.py::test_slow_or_silent_head_gets_408", 408),
+             T + "test_reliability_timeouts.py::test_slow_or_silent_head_gets_408", 408),
     Scenario("idle_keep_alive", "timeouts", "keep-alive connection left idle after an answer",
              "closed by the server after FISHLOC_KEEP_ALIVE_TIMEOUT_S (1 s in the test, 5 s by default)",
-             T + "test_timeouts.py::test_idle_keep_alive_connection_is_closed"),
+             T + "test_reliability_timeouts.py::test_idle_keep_alive_connection_is_closed"),
     Scenario("concurrent_put_delete", "registry", "3 clients send 40 frames each to camera `flip` while "
              "a 4th replaces it (altitude 2 m / 4 m) and deletes it, 60 writes",
              "every frame answered: 200 with positions of exactly one of the two altitudes, or 404 "
              "`camera_not_found`, or 503 with Retry-After; no 5xx; writes 200/201/204/404",
-             T + "test_concurrency.py::test_put_and_delete_while_frames_are_in_flight"),
+             T + "test_reliability_concurrency.py::test_put_and_delete_while_frames_are_in_flight"),
     Scenario("token_wrong", "access", "registry writes with tokens of 1 character, the token minus or "
              "plus a character, 4 kB",
              "401 `unauthorized` + `WWW-Authenticate: Bearer`; each one compared by hmac.compare_digest "
              "against the configured token",
-             T + "test_access.py::test_tokens_are_compared_with_compare_digest", 401),
+             T + "test_reliability_access.py::test_tokens_are_compared_with_compare_digest", 401),
     Scenario("detect_token", "access", "FISHLOC_DETECT_TOKEN set: detection without, with a wrong, or with "
              "a non-Bearer token", "401 `unauthorized`; the detect token and the API token both detect "
              "(200); the detect token cannot write the registry (401); without FISHLOC_DETECT_TOKEN "
-             "detection is open", T + "test_access.py::test_detect_token", 401),
+             "detection is open", T + "test_reliability_access.py::test_detect_token", 401),
     Scenario("token_not_logged", "access", "`fishloc serve` at debug level; writes and detections with "
              "right, wrong and near-miss tokens", "neither token (nor a near miss of it) appears anywhere "
-             "in the server's log", T + "test_access.py::test_tokens_never_reach_the_log"),
+             "in the server's log", T + "test_reliability_access.py::test_tokens_never_reach_the_log"),
     Scenario("tls_rest", "access", "FISHLOC_TLS_CERT/KEY set to a self-signed certificate (made with "
              "`cryptography`)", "HTTPS detection 200 for a client verifying against that certificate; a "
              "client without it fails the handshake; plain HTTP to the port fails",
-             T + "test_access.py::test_rest_over_tls", 200),
+             T + "test_reliability_access.py::test_rest_over_tls", 200),
     Scenario("tls_bad_files", "access", "certificate missing, key of another certificate, certificate "
              "without key", "start-up stops: exit status 2 and `cannot read the TLS certificate ...`, "
              "`... does not fit the certificate ...`, `tls_cert and tls_key go together`",
-             T + "test_access.py::test_tls_files_are_checked_at_start", 2),
+             T + "test_reliability_access.py::test_tls_files_are_checked_at_start", 2),
     Scenario("cors", "access", "browser preflight and GET with an Origin header",
              "no CORS headers at all by default (preflight 405); with FISHLOC_CORS_ORIGINS the listed "
              "origin is allowed (200, Access-Control-Allow-Origin), others refused (400)",
-             T + "test_access.py::test_cors_is_off_unless_configured"),
+             T + "test_reliability_access.py::test_cors_is_off_unless_configured"),
 ]
 SCENARIO = {row.name: row for row in SCENARIOS}
 
 
 def case_test_id(case: HttpCase) -> str:
-    return f"tests/reliability/test_bad_input.py::test_rest_case[{case.name}]"
+    return f"tests/reliability/test_reliability_bad_input.py::test_rest_case[{case.name}]"
 
 
 def _cell(text: str) -> str:

@@ -9,8 +9,8 @@ from collections.abc import Callable
 
 import httpx
 import numpy as np
-from samples import PERSON_FLOOR_XY_M, Samples
-from support import LiveServer
+from reliability_samples import PERSON_FLOOR_XY_M, Samples
+from reliability_support import LiveServer
 
 from fisheye import FisheyeCamera, camera_to_dict
 from service.config import Settings
