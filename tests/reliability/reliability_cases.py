@@ -303,6 +303,22 @@ SCENARIOS: list[Scenario] = [
              "no CORS headers at all by default (preflight 405); with FISHLOC_CORS_ORIGINS the listed "
              "origin is allowed (200, Access-Control-Allow-Origin), others refused (400)",
              T + "test_reliability_access.py::test_cors_is_off_unless_configured"),
+    Scenario("kill_9_registry", "faults", "`fishloc serve` (SQLite file) killed with SIGKILL while a client "
+             "loops PUTs (new cameras and replacements of one camera), after 40 acknowledged",
+             "`PRAGMA integrity_check` ok; after restart every camera acknowledged with 2xx is there, "
+             "intact; the replaced camera holds the last acknowledged record or the one cut off; at most "
+             "the one unacknowledged write in flight is kept; detection on a restored camera 200",
+             T + "test_reliability_faults.py::test_kill_9_while_writing_keeps_every_acknowledged_camera",
+             200),
+    Scenario("bad_model", "faults", "`fishloc serve --model` naming a missing file, a folder, an empty "
+             "file, text, or an ONNX file cut in half",
+             "exit status 2 before listening; stderr `fishloc serve: cannot load the model: <path> does "
+             "not exist` / `... is not a loadable ONNX model: ...`; no traceback",
+             T + "test_reliability_faults.py::test_a_model_that_cannot_be_served_stops_start_up", 2),
+    Scenario("warm_up", "faults", "model warm-up held back (test gate on Pipeline.warm_up)",
+             "`/readyz` 503 `not_ready` + Retry-After, detection 503 `not_ready`, `/healthz` 200, "
+             "`fishloc_ready 0`; once warm: `/readyz` 200, detection 200, `fishloc_ready 1`",
+             T + "test_reliability_faults.py::test_not_ready_until_the_model_is_warm", 503),
 ]
 SCENARIO = {row.name: row for row in SCENARIOS}
 
