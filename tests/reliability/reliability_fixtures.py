@@ -7,8 +7,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from reliability_support import LiveServer, test_settings
-from service_doubles import save_double_model
+from reliability_support import LiveServer, save_double_model, test_settings
 
 from fisheye import FisheyeCamera, load_camera
 from models import DEMO_CAMERA_PATH

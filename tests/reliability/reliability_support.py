@@ -30,6 +30,7 @@ if str(SERVICE_TESTS) not in sys.path:
     sys.path.insert(0, str(SERVICE_TESTS))
 
 from live_server import LiveServer  # noqa: E402
+from service_doubles import save_double_model  # noqa: E402
 
 from service.config import Settings  # noqa: E402
 
@@ -53,8 +54,8 @@ encode = _service.encode
 
 _LISTENING_RE = re.compile(r"REST listening on (https?)://[^:]+:(\d+)")
 
-__all__ = ["LiveServer", "RawResponse", "ServeProcess", "encode", "person_frame", "raw_request", "serve_args",
-           "test_settings", "vm_rss_kib"]
+__all__ = ["LiveServer", "RawResponse", "ServeProcess", "encode", "person_frame", "raw_request",
+           "save_double_model", "serve_args", "test_settings", "vm_rss_kib"]
 
 
 
