@@ -319,6 +319,12 @@ SCENARIOS: list[Scenario] = [
              "`/readyz` 503 `not_ready` + Retry-After, detection 503 `not_ready`, `/healthz` 200, "
              "`fishloc_ready 0`; once warm: `/readyz` 200, detection 200, `fishloc_ready 1`",
              T + "test_reliability_faults.py::test_not_ready_until_the_model_is_warm", 503),
+    Scenario("soak", "overload", "`fishloc serve` child process, 6 keep-alive clients for 20 s on loopback "
+             "(70% good frames, 15% bad frames, camera replacements, reads), admission limit 2 frames",
+             "every request answered; only 200, 400, 415, 422 and 503 (with Retry-After, the deliberate "
+             "overload); server VmRSS of the late fifth of the run within 10% + 24 MiB of the early "
+             "one; long run: `python tests/reliability/reliability_soak.py --minutes 30`",
+             T + "test_reliability_soak.py::test_short_soak", 503),
 ]
 SCENARIO = {row.name: row for row in SCENARIOS}
 

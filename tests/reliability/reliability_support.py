@@ -8,6 +8,7 @@ The raw client (http.client) sends paths and headers exactly as given: httpx wou
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import http.client
 import importlib.util
@@ -138,10 +139,11 @@ class ServeProcess:
     process (for /proc/PID/status and kill -9).
     """
 
-    def __init__(self, args: list[str], env: dict[str, str] | None = None) -> None:
+    def __init__(self, args: list[str], env: dict[str, str] | None = None,
+                 keep_lines: int | None = None) -> None:
         self.args = args
         self.env = env or {}
-        self.lines: list[str] = []
+        self.lines: collections.deque[str] = collections.deque(maxlen=keep_lines)
         self.process: subprocess.Popen[str] | None = None
         self.url = ""
         self._reader: threading.Thread | None = None
@@ -172,7 +174,7 @@ class ServeProcess:
         self._reader.start()
         if not self._listening.wait(timeout_s) or not self.url:
             self.stop()
-            raise RuntimeError("fishloc serve did not start:\n" + "".join(self.lines[-30:]))
+            raise RuntimeError("fishloc serve did not start:\n" + "".join(list(self.lines)[-30:]))
         return self
 
     def wait_ready(self, timeout_s: float = 60) -> None:
