@@ -10,8 +10,10 @@ server must still answer a good frame with the person at the right floor positio
 from __future__ import annotations
 
 import json
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from reliability_samples import Samples, jpeg_claiming, png_claiming, png_zero_bomb
 
@@ -348,13 +350,14 @@ def expect_text(expect: Expect) -> str:
 def markdown_tables() -> str:
     """The tables of docs/RELIABILITY.md, made from the case and scenario lists."""
     lines = [
-        "| case | request | answer | message holds | reproduce |",
-        "|---|---|---|---|---|",
+        "| case | request | answer | message holds | server after | reproduce |",
+        "|---|---|---|---|---|---|",
     ]
     for case in ALL_CASES:
+        after = "nothing stored; next frame 200" if case.method == "PUT" else "next frame 200"
         lines.append(
             f"| `{case.name}` | {_cell(case.method)} {_cell(case.what)} | {expect_text(case.expect)} | "
-            f"{_cell(case.expect.message) or '-'} | `{case_test_id(case)}` |"
+            f"{_cell(case.expect.message) or '-'} | {after} | `{case_test_id(case)}` |"
         )
     lines += [
         "",
@@ -366,5 +369,23 @@ def markdown_tables() -> str:
     return "\n".join(lines) + "\n"
 
 
+BEGIN = "<!-- reliability-cases:begin (made by tests/reliability/reliability_cases.py) -->\n"
+END = "<!-- reliability-cases:end -->\n"
+
+
+def document_block(text: str) -> str:
+    """The generated part of docs/RELIABILITY.md (between the markers)."""
+    return text[text.index(BEGIN) + len(BEGIN):text.index(END)]
+
+
+def rewrite_document(path: Path) -> None:
+    text = path.read_text()
+    start, end = text.index(BEGIN) + len(BEGIN), text.index(END)
+    path.write_text(text[:start] + markdown_tables() + text[end:])
+
+
 if __name__ == "__main__":
-    print(markdown_tables(), end="")
+    if sys.argv[1:2] == ["--write"]:
+        rewrite_document(Path(sys.argv[2]))
+    else:
+        print(markdown_tables(), end="")

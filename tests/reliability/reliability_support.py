@@ -27,8 +27,9 @@ from typing import Any
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 SERVICE_TESTS = REPO_ROOT / "tests" / "service"
-if str(SERVICE_TESTS) not in sys.path:
-    sys.path.insert(0, str(SERVICE_TESTS))
+for folder in (SERVICE_TESTS, REPO_ROOT):  # REPO_ROOT: when a helper runs as a script
+    if str(folder) not in sys.path:
+        sys.path.insert(0, str(folder))
 
 from live_server import LiveServer  # noqa: E402
 from service_doubles import save_double_model  # noqa: E402
