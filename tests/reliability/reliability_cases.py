@@ -327,6 +327,11 @@ SCENARIOS: list[Scenario] = [
              "overload); server VmRSS of the late fifth of the run within 10% + 24 MiB of the early "
              "one; long run: `python tests/reliability/reliability_soak.py --minutes 30`",
              T + "test_reliability_soak.py::test_short_soak", 503),
+    Scenario("read_only_root", "deployment", "`fishloc serve` in a mount namespace whose root filesystem "
+             "is read-only, only the registry folder writable (tmpfs)",
+             "starts, ready, camera PUT 201, detection 200; nothing else is written (the image runs as "
+             "uid 10001 with `--read-only --tmpfs /tmp` and the registry on /var/lib/fishloc)",
+             T + "test_reliability_readonly_root.py::test_serves_from_a_read_only_root", 200),
 ]
 SCENARIO = {row.name: row for row in SCENARIOS}
 

@@ -141,8 +141,9 @@ class ServeProcess:
     """
 
     def __init__(self, args: list[str], env: dict[str, str] | None = None,
-                 keep_lines: int | None = None) -> None:
+                 keep_lines: int | None = None, launcher: list[str] | None = None) -> None:
         self.args = args
+        self.launcher = launcher or []  # a command that runs the rest of the argv (e.g. unshare)
         self.env = env or {}
         self.lines: collections.deque[str] = collections.deque(maxlen=keep_lines)
         self.process: subprocess.Popen[str] | None = None
@@ -168,7 +169,8 @@ class ServeProcess:
     def start(self, timeout_s: float = 60) -> ServeProcess:
         env = {**os.environ, "PYTHONPATH": str(REPO_ROOT), "FISHLOC_LOG_JSON": "true", **self.env}
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "service.cli", "serve", *self.args], cwd=REPO_ROOT, env=env,
+            [*self.launcher, sys.executable, "-m", "service.cli", "serve", *self.args],
+            cwd=REPO_ROOT, env=env,
             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
         )
         self._reader = threading.Thread(target=self._read, daemon=True)
