@@ -10,6 +10,7 @@ from fisheye.boxes import (
     radial_angles_rad,
     radius_aligned_to_cepdof,
 )
+from fisheye.calibration import MarkResiduals, RulerFit, RulerFitConfig, fit_ruler_calibration
 from fisheye.camera import FisheyeCamera, FloorPoints
 from fisheye.camera_file import (
     CalibrationError,
@@ -18,10 +19,12 @@ from fisheye.camera_file import (
     camera_to_dict,
     load_camera,
     load_cameras,
+    read_opencv_calibration,
     save_camera,
 )
 from fisheye.letterbox import Letterbox
 from fisheye.rotated import polygon_iou, rotated_iou, rotated_nms
+from fisheye.ruler_marks import RulerMarks, read_marks_csv, simulate_ruler_marks
 from fisheye.site import SitePose
 
 __all__ = [
@@ -29,19 +32,27 @@ __all__ = [
     "FisheyeCamera",
     "FloorPoints",
     "Letterbox",
+    "MarkResiduals",
+    "RulerFit",
+    "RulerFitConfig",
+    "RulerMarks",
     "SitePose",
     "camera_from_dict",
     "camera_from_opencv",
     "camera_to_dict",
     "cepdof_to_radius_aligned",
     "cxcywh_to_corners",
+    "fit_ruler_calibration",
     "foot_points",
     "load_camera",
     "load_cameras",
     "polygon_iou",
     "radial_angles_rad",
     "radius_aligned_to_cepdof",
+    "read_marks_csv",
+    "read_opencv_calibration",
     "rotated_iou",
     "rotated_nms",
     "save_camera",
+    "simulate_ruler_marks",
 ]

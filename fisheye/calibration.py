@@ -242,19 +242,15 @@ def _initial_principal_point(marks: RulerMarks, config: RulerFitConfig,
     )
 
 
-def _check_directions(marks: RulerMarks, principal_point: tuple[float, float]) -> None:
-    """Fitting the centre needs marks in two directions that are not on one line."""
+def _direction_spread(marks: RulerMarks, principal_point: tuple[float, float]) -> float:
+    """Smallest eigenvalue of the scatter of the marks' unit directions from the centre: 0 when all
+    marks lie on one line through it, 0.5 for rulers evenly spread."""
     away = ~marks.is_nadir
     offset = np.where(marks.has_xy[away, None], marks.xy_m[away] * [1.0, -1.0],
                       marks.uv_px[away] - np.asarray(principal_point))
     length = np.hypot(offset[:, 0], offset[:, 1])
     unit = offset[length > 0] / length[length > 0, None]
-    spread = float(np.linalg.eigvalsh(unit.T @ unit / max(len(unit), 1))[0]) if len(unit) else 0.0
-    if spread < _MIN_DIRECTION_SPREAD:
-        raise CalibrationError(
-            "principal_point: fitting the principal point or the aspect ratio needs rulers in at least "
-            "two directions that are not on one line"
-        )
+    return float(np.linalg.eigvalsh(unit.T @ unit / len(unit))[0]) if len(unit) else 0.0
 
 
 def _residuals(camera: FisheyeCamera, marks: RulerMarks) -> MarkResiduals:
@@ -304,8 +300,12 @@ def fit_ruler_calibration(
         raise CalibrationError(
             f"principal_point {list(principal_point)} ({pp_source}) lies outside the image {width}x{height}"
         )
-    if fit_centre:
-        _check_directions(marks, principal_point)
+    spread = _direction_spread(marks, principal_point)
+    if fit_centre and spread < _MIN_DIRECTION_SPREAD:
+        raise CalibrationError(
+            "principal_point: fitting the principal point or the aspect ratio needs rulers in at least "
+            "two directions that are not on one line"
+        )
     directions = problem.initial_directions(principal_point[0], principal_point[1], config.aspect_ratio)
     q = np.concatenate([[principal_point[0], principal_point[1], math.log(config.aspect_ratio)], directions])
     slope_min = _MONOTONIC_SLOPE_FRACTION * problem.mean_slope(q)
@@ -333,6 +333,11 @@ def fit_ruler_calibration(
         f"marks reach {marks.distance_m.max():.2f} m (θ = {math.degrees(theta_marked):.1f}°); floor "
         "positions farther out are extrapolated"
     )
+    if not config.fit_principal_point and spread >= _MIN_DIRECTION_SPREAD:
+        notes.append(
+            "the rulers point in several directions: fitting the principal point from all marks "
+            "(--fit-principal-point) averages out the error of the single nadir click"
+        )
     if constrained:
         notes.append(
             f"r(θ) was held strictly increasing up to {config.theta_max_deg:g}° by the monotonicity "

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fisheye.camera import FisheyeCamera
 from fisheye.camera_file import CalibrationError
 
 FloatArray = NDArray[np.float64]
@@ -174,6 +175,34 @@ def read_marks_csv(path: str | Path) -> RulerMarks:
     except OSError as error:
         raise CalibrationError(f"cannot read marks file {file}: {error.strerror}") from None
     return parse_marks_csv(text, source=str(file))
+
+
+def simulate_ruler_marks(
+    camera: FisheyeCamera,
+    directions_deg: ArrayLike,
+    distances_m: ArrayLike,
+    noise_px: float = 0.0,
+    seed: int | None = None,
+    with_xy: bool = False,
+) -> RulerMarks:
+    """The marks a user would take of `camera`: one ruler per floor-frame direction (degrees,
+    counter-clockwise from x), a mark at each distance (> 0) plus one nadir mark, every pixel
+    displaced by Gaussian noise of `noise_px` per axis. For planning a calibration and for tests."""
+    rng = np.random.default_rng(seed)
+    distances = np.asarray(distances_m, dtype=np.float64).reshape(-1)
+    uv = [np.zeros((1, 2)) + camera.principal_point]
+    distance, xy, labels = [np.zeros(1)], [np.zeros((1, 2))], ["nadir"]
+    for direction in np.asarray(directions_deg, dtype=np.float64).reshape(-1):
+        unit = np.array([math.cos(math.radians(direction)), math.sin(math.radians(direction))])
+        points = distances[:, None] * unit
+        uv.append(camera.floor_to_pixels(points))
+        distance.append(distances)
+        xy.append(points)
+        labels += [f"{direction:g}deg"] * len(distances)
+    pixels = np.concatenate(uv)
+    pixels = pixels + rng.normal(0.0, noise_px, pixels.shape) if noise_px > 0 else pixels
+    floor = np.concatenate(xy) if with_xy else None
+    return RulerMarks.from_arrays(pixels, np.concatenate(distance), floor, labels)
 
 
 def marks_to_csv(marks: RulerMarks) -> str:

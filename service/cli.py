@@ -16,6 +16,7 @@ from collections.abc import Sequence
 COMMANDS: dict[str, tuple[str, str]] = {
     "calibrate": ("fisheye.calibrate_cli", "fit a camera's lens from ruler marks, or import OpenCV K/D"),
     "serve": ("service.serve_cli", "serve the model over REST and gRPC (default model, demo camera)"),
+    "synth": ("detector.data.synth_cli", "render synthetic fisheye frames with exact ground truth"),
 }
 
 # Modules that only the training extra installs.

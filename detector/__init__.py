@@ -1,0 +1,1 @@
+"""FishLoc detector: network, losses, datasets, training and evaluation (PyTorch)."""

@@ -1,0 +1,1 @@
+"""Data: the synthetic scene renderer and the dataset readers."""

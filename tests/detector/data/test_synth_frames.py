@@ -1,0 +1,88 @@
+"""Rendered frames against the geometry: floor points, foot points, silhouettes and boxes."""
+
+from functools import cache
+
+import numpy as np
+import pytest
+
+from detector.data.synth import SynthConfig, SynthFrame, render_frame, render_frame_with_ids
+from fisheye import cxcywh_to_corners, foot_points, load_camera
+from models import DEMO_CAMERA_PATH
+
+CONFIGS = {
+    "indoor": SynthConfig(size=320, kind="indoor", people=(3, 8), images_per_scene=2),
+    "outdoor": SynthConfig(size=320, kind="outdoor", people=(3, 8), images_per_scene=2),
+    "demo": SynthConfig(size=288, kind="indoor", people=(2, 6), camera=load_camera(DEMO_CAMERA_PATH)),
+}
+CASES = [(name, index) for name in CONFIGS for index in range(3)]
+
+
+@cache
+def _frame(name: str, index: int) -> tuple[SynthFrame, np.ndarray]:
+    return render_frame_with_ids(11, "seen", index, CONFIGS[name])
+
+
+@pytest.mark.parametrize(("name", "index"), CASES)
+def test_location_projects_to_the_foot_region(name: str, index: int) -> None:
+    """The floor point between the feet projects near the box's foot point: within half the box's
+    long side for unoccluded people (shoes, and bodies seen from right above, reach nearer the
+    principal point than the ankles), within the long side for partly hidden ones."""
+    frame, _ = _frame(name, index)
+    people = [p for p in frame.people if not p.ignore]
+    assert people, "every test frame should show someone"
+    boxes = np.array([p.rotated_box for p in people])
+    feet = foot_points(boxes, frame.camera.principal_point)
+    located = frame.camera.floor_to_pixels(np.array([p.location_m for p in people]))
+    for person, box, foot, uv in zip(people, boxes, feet, located, strict=True):
+        share = 0.5 if person.visible_fraction >= 0.9 else 1.0
+        tolerance = share * max(box[2], box[3]) + 2.0
+        assert np.hypot(*(uv - foot)) <= tolerance, (box, foot, uv)
+
+
+@pytest.mark.parametrize(("name", "index"), CASES)
+def test_silhouette_lies_inside_its_radius_aligned_box(name: str, index: int) -> None:
+    frame, ids = _frame(name, index)
+    pp = np.asarray(frame.camera.principal_point)
+    for person in frame.people:
+        rows, cols = np.nonzero(ids == person.person)
+        assert len(rows) == person.visible_px
+        box = np.asarray(person.rotated_box)
+        offset = box[:2] - pp
+        radial = offset / np.linalg.norm(offset)
+        tangential = np.array([-radial[1], radial[0]])
+        pixels = np.stack([cols, rows], axis=1) - box[:2]
+        assert np.all(np.abs(pixels @ radial) <= box[3] / 2 + 1e-6)
+        assert np.all(np.abs(pixels @ tangential) <= box[2] / 2 + 1e-6)
+        x, y, _, h = person.bbox
+        assert cols.min() - 0.5 == pytest.approx(x) and rows.max() + 0.5 == pytest.approx(y + h)
+        assert 0 < person.visible_fraction <= 1
+
+
+@pytest.mark.parametrize(("name", "index"), CASES)
+def test_boxes_are_radius_aligned(name: str, index: int) -> None:
+    frame, _ = _frame(name, index)
+    pp = np.asarray(frame.camera.principal_point)
+    boxes = np.array([p.rotated_box for p in frame.people]).reshape(-1, 4)
+    corners = cxcywh_to_corners(boxes, pp)
+    for box, quad in zip(boxes, corners, strict=True):
+        h_axis = quad[2:].mean(axis=0) - quad[:2].mean(axis=0)  # near side -> far side
+        ray = box[:2] - pp
+        assert np.linalg.norm(h_axis) == pytest.approx(box[3])
+        cosine = h_axis @ ray / (np.linalg.norm(h_axis) * np.linalg.norm(ray))
+        assert cosine == pytest.approx(1.0, abs=1e-9)
+
+
+def test_same_seed_same_bytes_other_seed_other_frame() -> None:
+    config = CONFIGS["indoor"]
+    first = render_frame(5, "seen", 1, config)
+    again = render_frame(5, "seen", 1, config)
+    other = render_frame(6, "seen", 1, config)
+    assert first.jpeg == again.jpeg and first.people == again.people
+    assert first.jpeg != other.jpeg
+    assert first.scene_id == other.scene_id  # same scene, other people
+
+
+def test_demo_camera_frames_use_the_demo_lens() -> None:
+    frame, _ = _frame("demo", 0)
+    demo = load_camera(DEMO_CAMERA_PATH).scaled_to((288, 288))
+    assert frame.camera == demo
