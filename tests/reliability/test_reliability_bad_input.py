@@ -54,3 +54,18 @@ def test_rest_case(server: LiveServer, samples: Samples, case: HttpCase) -> None
     # Unharmed: the next good frame is answered, and no refused record reached the registry.
     assert_person(raw_request(server.url, "POST", "/v1/cameras/demo/detect", samples.good_jpeg, JPEG))
     assert raw_request(server.url, "GET", "/v1/cameras/x").status == 404
+
+
+@pytest.mark.parametrize("name", ["png_bomb_header", "png_bomb_zlib", "jpeg_bomb_header"])
+def test_bombs_are_refused_without_decoding(server: LiveServer, samples: Samples, name: str,
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    """The pixel limit is applied to the header: the decoder is never called for a bomb."""
+    import service.frame_decode
+
+    def no_decoding(*_args: object) -> None:
+        raise AssertionError("a frame over the pixel limit reached the decoder")
+
+    monkeypatch.setattr(service.frame_decode.cv2, "imdecode", no_decoding)
+    case = next(case for case in ALL_CASES if case.name == name)
+    response = raw_request(server.url, "POST", case.path, case.body(samples), case.headers)
+    assert response.status == 413 and response.error_code == "image_too_large"
