@@ -21,6 +21,15 @@ CameraId = Path(pattern=CAMERA_ID_PATTERN, description="camera id")
 _MAX_RECORD_BYTES = 64 * 1024
 
 
+def _record_schema() -> dict[str, Any]:
+    """The JSON schema of a PUT body: the camera record with `id` optional (the path gives it)."""
+    schema = FisheyeCamera.model_json_schema(ref_template="#/components/schemas/{model}")
+    schema.pop("$defs", None)  # SitePose is in the components already, by FisheyeCamera
+    schema["required"] = [name for name in schema.get("required", []) if name != "id"]
+    schema["title"] = "CameraRecord"
+    return schema
+
+
 def not_found(camera_id: str) -> ApiError:
     return ApiError(404, "camera_not_found", f"no camera {camera_id!r} in the registry")
 
@@ -49,7 +58,7 @@ async def get_camera(state: State, camera_id: str = CameraId) -> dict[str, Any]:
     description="Body: the camera-file record of DESIGN.md as JSON; `id` may be left out and must "
                 "match the path when given. Answers 201 when the camera is new, 200 when replaced.",
     openapi_extra={"requestBody": {"required": True, "content": {
-        "application/json": {"schema": {"$ref": "#/components/schemas/FisheyeCamera"}}}}},
+        "application/json": {"schema": _record_schema()}}}},
 )
 async def put_camera(request: Request, response: Response, state: State,
                      camera_id: str = CameraId) -> dict[str, Any]:
