@@ -3,9 +3,7 @@ from certificate paths, and CORS off unless configured."""
 
 from __future__ import annotations
 
-import datetime
 import hmac
-import ipaddress
 import signal
 import ssl
 import time
@@ -14,13 +12,9 @@ from pathlib import Path
 
 import httpx
 import pytest
-from cryptography import x509
-from cryptography.hazmat.primitives import hashes, serialization
-from cryptography.hazmat.primitives.asymmetric import ec
-from cryptography.x509.oid import NameOID
 from reliability_cases import SCENARIO
 from reliability_samples import Samples
-from reliability_support import LiveServer, ServeProcess, serve_args
+from reliability_support import LiveServer, ServeProcess, self_signed, serve_args
 
 import service.dependencies
 from fisheye import FisheyeCamera, camera_to_dict
@@ -116,29 +110,6 @@ def test_tokens_never_reach_the_log(double_model_path: Path, tmp_path: Path,
 
 
 # ----- TLS
-
-
-def self_signed(folder: Path) -> tuple[Path, Path]:
-    """A certificate for 127.0.0.1 and localhost, signed by its own key (PEM files)."""
-    key = ec.generate_private_key(ec.SECP256R1())
-    name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "fishloc-test")])
-    now = datetime.datetime.now(datetime.UTC)
-    certificate = (
-        x509.CertificateBuilder().subject_name(name).issuer_name(name).public_key(key.public_key())
-        .serial_number(x509.random_serial_number())
-        .not_valid_before(now - datetime.timedelta(minutes=5))
-        .not_valid_after(now + datetime.timedelta(days=1))
-        .add_extension(x509.SubjectAlternativeName([x509.DNSName("localhost"),
-                                                    x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]),
-                       critical=False)
-        .add_extension(x509.BasicConstraints(ca=True, path_length=None), critical=True)
-        .sign(key, hashes.SHA256())
-    )
-    cert_path, key_path = folder / "cert.pem", folder / "key.pem"
-    cert_path.write_bytes(certificate.public_bytes(serialization.Encoding.PEM))
-    key_path.write_bytes(key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
-                                           serialization.NoEncryption()))
-    return cert_path, key_path
 
 
 def test_rest_over_tls(settings_for: Callable[..., Settings], tmp_path: Path,
