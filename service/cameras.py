@@ -189,6 +189,7 @@ class CameraRegistry:
     def seed_once(self, key: str, camera_path: str | Path) -> bool:
         """Add the camera of `camera_path` the first time this database is opened with `key`
         (so a deleted demo camera stays deleted); True when it was added now."""
+        camera = load_camera(camera_path)  # a bad file fails before anything is recorded
         try:
             with self.engine.begin() as connection:
                 query = select(registry_meta.c.value).where(registry_meta.c.key == key)
@@ -198,7 +199,6 @@ class CameraRegistry:
                 connection.execute(insert(registry_meta).values(key=key, value="seeded"))
         except IntegrityError:  # another process seeded it at the same moment
             return False
-        camera = load_camera(camera_path)
         if self.get(camera.id) is None:
             self.put(camera)
             log.info("camera %s added from %s", camera.id, camera_path, extra={"camera_id": camera.id})

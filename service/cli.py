@@ -16,7 +16,11 @@ from collections.abc import Sequence
 COMMANDS: dict[str, tuple[str, str]] = {
     "calibrate": ("fisheye.calibrate_cli", "fit a camera's lens from ruler marks, or import OpenCV K/D"),
     "serve": ("service.serve_cli", "serve the model over REST and gRPC (default model, demo camera)"),
+    "gateway": ("service.gateway_cli", "stream a camera's frames to a server over gRPC, print the answers"),
     "synth": ("detector.data.synth_cli", "render synthetic fisheye frames with exact ground truth"),
+    "export": ("exporter.export", "turn a training checkpoint into a verified ONNX model (optional INT8)"),
+    "train": ("detector.train", "train the person detector on annotated fisheye frames"),
+    "eval": ("detector.evaluate", "evaluate a checkpoint or ONNX model: mAP, AP by distance, PE in metres"),
 }
 
 # Modules that only the training extra installs.

@@ -27,7 +27,7 @@ FloatArray = NDArray[np.float64]
 class PipelineConfig:
     """Post-processing and safety limits of the pipeline."""
 
-    nms_iou: float = 0.45
+    nms_iou: float = 0.6
     max_detections: int = 300
     max_pixels: int = 40_000_000
     min_frame_side_px: int = 16  # smaller frames cannot show a person; refused, not guessed at

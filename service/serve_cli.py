@@ -71,6 +71,9 @@ def run(args: argparse.Namespace) -> int:
     except TlsError as error:
         print(f"fishloc serve: {error}", file=sys.stderr)
         return 2
+    except (RuntimeError, OSError) as error:  # e.g. a port already in use
+        print(f"fishloc serve: {error}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         pass
     return 0

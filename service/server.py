@@ -1,13 +1,18 @@
 """One FishLoc service instance: the state (model, registry, metrics) and the servers over it.
 
-`Service.start()` serves REST (uvicorn) on the running event loop; `Service.stop()` shuts it down
-after answering the requests in flight. `fishloc serve` and the tests both use it.
+`Service.start()` serves REST (uvicorn) and gRPC (grpc.aio) side by side on the running event loop;
+`Service.stop()` shuts both down after answering the requests and streamed frames in flight.
+`fishloc serve` and the tests both use it.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
+import signal
+import socket
+from collections.abc import Iterator
 
 import uvicorn
 
@@ -16,6 +21,7 @@ from service.app import create_app
 from service.cameras import CameraRegistry
 from service.config import Settings
 from service.dependencies import ServiceState
+from service.grpc_server import GrpcFrontEnd
 from service.http_protocol import head_deadline_protocol
 from service.metrics import ServiceMetrics
 from service.runner import build_runner
@@ -24,6 +30,15 @@ from service.tls import TlsFiles, tls_from_settings
 log = logging.getLogger(__name__)
 
 DEMO_SEED_KEY = "seeded:demo"
+
+
+class _HttpServer(uvicorn.Server):
+    """uvicorn without its own signal handling: `run_service` stops REST and gRPC together (uvicorn
+    would re-raise the signal after its own shutdown and kill the process before gRPC's)."""
+
+    @contextlib.contextmanager
+    def capture_signals(self) -> Iterator[None]:
+        yield
 
 
 def build_state(settings: Settings) -> ServiceState:
@@ -44,7 +59,7 @@ def build_state(settings: Settings) -> ServiceState:
 
 
 class Service:
-    """REST beside (later) gRPC, over one ServiceState, on the running event loop."""
+    """REST beside gRPC over one ServiceState, on the running event loop."""
 
     def __init__(self, state: ServiceState, warm_up: bool = True) -> None:
         self.state = state
@@ -52,6 +67,7 @@ class Service:
         self._http: uvicorn.Server | None = None
         self._http_task: asyncio.Task[None] | None = None
         self.tls: TlsFiles | None = None
+        self.grpc: GrpcFrontEnd | None = None
 
     @property
     def http_port(self) -> int:
@@ -60,9 +76,18 @@ class Service:
         port: int = self._http.servers[0].sockets[0].getsockname()[1]
         return port
 
+    @property
+    def grpc_port(self) -> int:
+        if self.grpc is None:
+            raise RuntimeError("gRPC is not running")
+        return self.grpc.port
+
     async def start(self) -> None:
         settings = self.state.settings
         self.tls = tls_from_settings(settings)  # TlsError before anything listens
+        if settings.grpc_port >= 0:
+            self.grpc = GrpcFrontEnd(self.state, tls=self.tls)
+            await self.grpc.start()
         config = uvicorn.Config(
             create_app(self.state, warm_up=self.warm_up), host=settings.host, port=settings.http_port,
             log_config=None, access_log=False, lifespan="on", timeout_graceful_shutdown=30,
@@ -71,11 +96,22 @@ class Service:
             ssl_certfile=self.tls.cert_path if self.tls else None,
             ssl_keyfile=self.tls.key_path if self.tls else None,
         )
-        self._http = uvicorn.Server(config)
-        self._http_task = asyncio.create_task(self._http.serve())
+        try:
+            # Bound here so that a taken port is a clear OSError, not uvicorn's sys.exit.
+            family = socket.AF_INET6 if ":" in settings.host else socket.AF_INET
+            sock = socket.create_server((settings.host, settings.http_port), family=family)
+        except OSError as error:
+            if self.grpc is not None:
+                await self.grpc.stop(grace_s=0)
+            where = f"{settings.host}:{settings.http_port}"
+            raise OSError(f"cannot listen for REST on {where}: {error.strerror}") from None
+        self._http = _HttpServer(config)
+        self._http_task = asyncio.create_task(self._http.serve(sockets=[sock]))
         while not self._http.started:
             if self._http_task.done():
-                await self._http_task  # raises what made start-up fail
+                if self.grpc is not None:
+                    await self.grpc.stop(grace_s=0)
+                # uvicorn logs the cause (e.g. the port is taken) and exits its task.
                 raise RuntimeError(f"the HTTP server did not start on {settings.host}:{settings.http_port}")
             await asyncio.sleep(0.01)
         scheme = "https" if self.tls else "http"
@@ -84,22 +120,32 @@ class Service:
     async def wait(self) -> None:
         """Until the HTTP server exits (SIGINT/SIGTERM in the main thread, or `stop`)."""
         if self._http_task is not None:
-            await self._http_task
+            await asyncio.shield(self._http_task)  # a waiter being cancelled must not stop the server
 
     async def stop(self) -> None:
         """Stop accepting, answer what is in flight, then release the model and the database."""
         if self._http is not None:
             self._http.should_exit = True
-        await self.wait()
+        stopping = [self.wait()] if self.grpc is None else [self.grpc.stop(), self.wait()]
+        await asyncio.gather(*stopping)
         self.state.runner.close()
         self.state.registry.close()
 
 
 async def run_service(settings: Settings) -> None:
-    """Serve until interrupted."""
+    """Serve until SIGINT or SIGTERM, then shut down gracefully."""
     service = Service(build_state(settings))
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
     await service.start()
     try:
-        await service.wait()
+        waiters = {asyncio.create_task(stop.wait()), asyncio.create_task(service.wait())}
+        _, pending = await asyncio.wait(waiters, return_when=asyncio.FIRST_COMPLETED)
+        for task in pending:
+            task.cancel()
+        log.info("shutting down: answering what is in flight")
     finally:
         await service.stop()
+    log.info("stopped")

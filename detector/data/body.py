@@ -26,6 +26,7 @@ FloatArray = NDArray[np.float64]
 POSES = ("standing", "walking", "sitting")
 CARRIED = ("none", "bag", "box", "backpack", "phone")
 HAIR_STYLES = ("short", "long", "bald", "hat")
+ARM_POSES = ("down", "crossed", "hips", "pockets", "pointing")
 
 # Body part ids (Primitive.part), used for shading tweaks and in tests.
 HEAD, HAIR, TORSO, ARM, HAND, LEG, SHOE, ITEM = range(1, 9)
@@ -36,7 +37,8 @@ class PersonSpec:
     """A person: floor position of the pelvis `position_m` (2,), facing `heading_rad` (floor frame,
     counter-clockwise from +x), `height_m`, `width_scale` (~0.85-1.2), `pose` (POSES) with walking
     `phase_rad` and `stride_rad`, `lean_rad` forward, `seat_height_m` when sitting, `carried`
-    (CARRIED), `hair_style` and the materials of skin, hair, top, bottom and shoes."""
+    (CARRIED), `hair_style`, the materials of skin, hair, top, bottom and shoes, and for standing
+    people an `arm_pose` (ARM_POSES)."""
 
     position_m: tuple[float, float]
     heading_rad: float
@@ -57,6 +59,7 @@ class PersonSpec:
     bottom: Material
     shoes: Material
     item: Material
+    arm_pose: str = "down"
 
 
 @dataclass
@@ -150,22 +153,31 @@ def build_person(spec: PersonSpec) -> Person:
                                       head + np.array([-0.08, 0, -0.2]) * s), 0.07 * s, spec.hair, HAIR))
     # arms
     swing = spec.stride_rad * np.sin(spec.phase_rad) if spec.pose == "walking" else 0.0
-    arm_poses = {"left": (-0.7 * swing, 0.12, 0.25), "right": (0.7 * swing, 0.12, 0.25)}
+    # (upper arm swing, spread, elbow bend, forearm spread) per arm
+    arm_poses = {"left": (-0.7 * swing, 0.12, 0.25, 0.06), "right": (0.7 * swing, 0.12, 0.25, 0.06)}
+    if spec.pose == "standing":
+        arm_poses = {
+            "down": arm_poses,
+            "crossed": {"left": (0.2, 0.05, 1.35, -1.0), "right": (0.25, 0.05, 1.3, -0.95)},
+            "hips": {"left": (-0.1, 0.55, 1.3, -1.1), "right": (-0.1, 0.55, 1.3, -1.1)},
+            "pockets": {"left": (-0.08, 0.2, 0.25, 0.0), "right": (-0.08, 0.2, 0.25, 0.0)},
+            "pointing": {"left": arm_poses["left"], "right": (1.1, 0.2, 0.2, 0.1)},
+        }[spec.arm_pose]
     if spec.pose == "sitting":
-        arm_poses = {"left": (0.35, 0.1, 1.1), "right": (0.3, 0.1, 1.2)}
+        arm_poses = {"left": (0.35, 0.1, 1.1, 0.05), "right": (0.3, 0.1, 1.2, 0.05)}
     item_at: FloatArray | None = None
     if spec.carried == "box":
-        arm_poses = {"left": (0.35, 0.05, 1.2), "right": (0.35, 0.05, 1.2)}
+        arm_poses = {"left": (0.35, 0.05, 1.2, 0.0), "right": (0.35, 0.05, 1.2, 0.0)}
     elif spec.carried == "phone":
-        arm_poses["right"] = (0.3, 0.05, 1.9)
+        arm_poses["right"] = (0.3, 0.05, 1.9, -0.2)
     elif spec.carried == "bag":
-        arm_poses["right"] = (0.0, 0.15, 0.05)
+        arm_poses["right"] = (0.0, 0.15, 0.05, 0.08)
     sleeve = spec.top if spec.long_sleeves else spec.skin
     for name, side in (("left", 1.0), ("right", -1.0)):
-        upper_swing, spread, bend = arm_poses[name]
+        upper_swing, spread, bend, fore_spread = arm_poses[name]
         shoulder = np.array([0.0, side * 0.2 * s * w, shoulder_z - 0.02 * s])
         elbow = shoulder + 0.30 * s * _limb(upper_swing, spread, side)
-        wrist = elbow + 0.27 * s * _limb(upper_swing + bend, spread * 0.5, side)
+        wrist = elbow + 0.27 * s * _limb(upper_swing + bend, fore_spread, side)
         upper.append(("capsule", (shoulder, elbow), 0.047 * s, spec.top, ARM))
         upper.append(("capsule", (elbow, wrist), 0.038 * s, sleeve, ARM))
         upper.append(("ellipsoid", (wrist + 0.04 * s * _limb(upper_swing + bend, 0.0, side),

@@ -8,7 +8,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.data import objects as obj
-from detector.data.body import PersonSpec, seat_height_for
+from detector.data.body import ARM_POSES, PersonSpec, seat_height_for
 from detector.data.palettes import clothing_color, hair_color, skin_color
 from detector.data.primitives import PATTERN_CHECKS, PATTERN_PLAIN, PATTERN_STRIPES, Material
 from detector.data.scenes import Scene
@@ -79,6 +79,7 @@ def _person(rng: np.random.Generator, x: float, y: float, heading: float, pose: 
         lean_rad=float(rng.uniform(-0.12, 0.3) if pose == "sitting" else rng.uniform(-0.03, 0.1)),
         seat_height_m=0.46,
         carried=carried,
+        arm_pose=str(rng.choice(ARM_POSES, p=[0.5, 0.15, 0.1, 0.15, 0.1])) if carried == "none" else "down",
         **clothes,  # type: ignore[arg-type]
     )
 

@@ -97,6 +97,19 @@ def _room(rng: np.random.Generator, size: tuple[float, float]) -> tuple[float, f
     return float(x0), float(y0), float(x0 + w), float(y0 + d)
 
 
+def _free_spot(rng: np.random.Generator, room: tuple[float, float, float, float], radius: float,
+               placed: list[obj.Placed]) -> tuple[float, float] | None:
+    """A point of `room` at least `radius` from its walls and clear of the placed objects."""
+    x0, y0, x1, y1 = room
+    if x1 - x0 <= 2 * radius or y1 - y0 <= 2 * radius:
+        return None
+    for _ in range(20):
+        x, y = rng.uniform(x0 + radius, x1 - radius), rng.uniform(y0 + radius, y1 - radius)
+        if all(np.hypot(o.footprint[0] - x, o.footprint[1] - y) > o.footprint[2] + radius for o in placed):
+            return float(x), float(y)
+    return None
+
+
 def _table_set(rng: np.random.Generator, x: float, y: float, yaw: float, length: float, depth: float,
                top: Material, legs: Material, seat: Material, sides: tuple[int, ...]) -> list[obj.Placed]:
     """A table with chairs along the given sides (+1 / -1 along the table's y axis)."""
@@ -196,19 +209,35 @@ def _indoor(rng: np.random.Generator, split: str, style: str, altitude: float
             items += _table_set(rng, float(cx), float(cy), float(rng.choice([0, np.pi / 2])),
                                 rng.uniform(1.4, 2.6), rng.uniform(0.8, 1.2), top, legs, seat, (-1, 1))
     elif style == "room":
+        for _ in range(rng.integers(2, 6)):
+            length, depth = rng.uniform(1.2, 3.2), rng.uniform(0.7, 1.2)
+            spot = _free_spot(rng, room, 0.5 * np.hypot(length, depth) + 0.8, items)
+            if spot is not None:
+                items += _table_set(rng, spot[0], spot[1], float(rng.choice([0, np.pi / 2])), length, depth,
+                                    top, legs, seat, (-1, 1))
+        for _ in range(rng.integers(0, 4)):  # desks against the walls
+            length = rng.uniform(1.0, 1.8)
+            along_x = rng.random() < 0.5
+            if along_x:
+                side = rng.choice([-1, 1])
+                cx, cy, yaw = rng.uniform(x0 + 1, x1 - 1), (y1 - 0.4 if side > 0 else y0 + 0.4), 0.0
+                sides: tuple[int, ...] = (-int(side),)
+            else:
+                side = rng.choice([-1, 1])
+                cx, cy, yaw = (x1 - 0.4 if side > 0 else x0 + 0.4), rng.uniform(y0 + 1, y1 - 1), np.pi / 2
+                sides = (int(side),)
+            if all(np.hypot(o.footprint[0] - cx, o.footprint[1] - cy) > o.footprint[2] + 1.0 for o in items):
+                items += _table_set(rng, float(cx), float(cy), yaw, length, 0.7, top, legs, seat, sides)
         for _ in range(rng.integers(1, 4)):
-            cx, cy = rng.uniform(x0 + 1.5, x1 - 1.5), rng.uniform(y0 + 1.5, y1 - 1.5)
-            items += _table_set(rng, float(cx), float(cy), float(rng.choice([0, np.pi / 2])),
-                                rng.uniform(1.2, 3.2), rng.uniform(0.7, 1.2), top, legs, seat, (-1, 1))
-        for _ in range(rng.integers(0, 3)):
             along_x = rng.random() < 0.5
             length = rng.uniform(0.8, 2.0)
             if along_x:
                 cx, cy, yaw = rng.uniform(x0 + 1, x1 - 1), y1 - 0.3, 0.0
             else:
                 cx, cy, yaw = x0 + 0.3, rng.uniform(y0 + 1, y1 - 1), np.pi / 2
-            items.append(obj.cabinet(float(cx), float(cy), yaw, length, 0.5, rng.uniform(0.7, 1.1),
-                                     mat(scene_color("furniture", split, rng))))
+            if all(np.hypot(o.footprint[0] - cx, o.footprint[1] - cy) > o.footprint[2] + 0.6 for o in items):
+                items.append(obj.cabinet(float(cx), float(cy), yaw, length, 0.5, rng.uniform(0.7, 1.1),
+                                         mat(scene_color("furniture", split, rng))))
         if rng.random() < 0.4:
             items.append(obj.sofa(float(x1 - 0.6), float(rng.uniform(y0 + 1.5, y1 - 1.5)), np.pi,
                                   rng.uniform(1.4, 2.4), mat(scene_color("rug", split, rng))))
@@ -370,5 +399,7 @@ def build_scene(split: str, index: int, kind: str | None = None,
     else:
         env, items, walk = _outdoor(rng, split, style)
     # Nothing solid may stand where the lens is (pole cameras sit above the pole's foot).
-    items = [o for o in items if np.hypot(o.footprint[0], o.footprint[1]) > o.footprint[2] + 0.3]
+    lens = np.array([0.0, 0.0, cam.altitude_m])
+    items = [o for o in items if np.hypot(o.footprint[0], o.footprint[1]) > o.footprint[2] + 0.3
+             and all(np.linalg.norm(p.center - lens) > p.radius_m + 0.1 for p in o.primitives)]
     return Scene(scene_id, split, kind, style, cam, env, items, walk)

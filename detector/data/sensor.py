@@ -19,7 +19,9 @@ ImageU8 = NDArray[np.uint8]
 class SensorSettings:
     """One frame's sensor: mean brightness `exposure` (of the tone-mapped image, 0-1), per-channel
     `white_balance` gains, `vignetting` strength, `blur_px` (Gaussian sigma at 1024 px), shot/read noise
-    `noise` (linear units), `jpeg_quality`, `timestamp` text or None and its `timestamp_corner`."""
+    `noise` (linear units), `jpeg_quality`, `timestamp` text or None and its `timestamp_corner`,
+    global `contrast`, `local_contrast` (unsharp masking, as camera HDR processing does) and
+    `chromatic_px`: lateral colour shift of red against blue at the rim (at 1024 px)."""
 
     exposure: float
     white_balance: tuple[float, float, float]
@@ -30,6 +32,8 @@ class SensorSettings:
     timestamp: str | None
     timestamp_corner: int
     contrast: float
+    local_contrast: float
+    chromatic_px: float
 
 
 def sample_sensor(rng: np.random.Generator, night: bool) -> SensorSettings:
@@ -52,6 +56,8 @@ def sample_sensor(rng: np.random.Generator, night: bool) -> SensorSettings:
         timestamp=stamp,
         timestamp_corner=int(rng.choice([0, 0, 0, 1, 2, 3])),
         contrast=float(rng.uniform(0.0, 0.35)),
+        local_contrast=float(rng.uniform(0.0, 0.5)),
+        chromatic_px=float(rng.uniform(0.0, 1.5)),
     )
 
 
@@ -107,12 +113,36 @@ def develop(linear: Image32, grid: RayGrid, settings: SensorSettings, rng: np.ra
     sigma = settings.blur_px * np.sqrt(scale)
     if sigma > 0.25:
         image = np.asarray(cv2.GaussianBlur(image, (0, 0), sigma), np.float32)
+    if settings.local_contrast > 0:
+        # The wide blur is taken at a quarter of the size: it only holds low frequencies.
+        height, width = grid.shape
+        small = cv2.resize(image, (max(1, width // 4), max(1, height // 4)), interpolation=cv2.INTER_AREA)
+        small = cv2.GaussianBlur(small, (0, 0), 3.0 * scale)
+        halo = cv2.resize(small, (width, height), interpolation=cv2.INTER_LINEAR)
+        image = np.maximum(image + settings.local_contrast * (image - halo), 0.0).astype(np.float32)
+    if settings.chromatic_px > 0:
+        image = _lateral_colour(image, grid, settings.chromatic_px * scale)
     noise_std = np.sqrt(np.maximum(image, 0.0) * settings.noise + (settings.noise * 0.1) ** 2)
     image += noise_std * _normal_noise(rng, image.shape)
     index = np.clip(image * _LUT_STEPS, 0, _LUT_RANGE * _LUT_STEPS).astype(np.int32)
     out = _tone_curve(settings.contrast)[index]
     if settings.timestamp:
         _stamp(out, settings.timestamp, settings.timestamp_corner)
+    return out
+
+
+def _lateral_colour(image: Image32, grid: RayGrid, shift_px: float) -> Image32:
+    """Scale red out and blue in about the principal point so they part by `shift_px` at the
+    image circle's rim (lateral chromatic aberration of wide lenses)."""
+    u0, v0 = grid.camera.principal_point
+    rim = max(grid.camera.image_circle_radius_px(), 1.0)
+    height, width = grid.shape
+    out = image.copy()
+    for channel, sign in ((0, 1.0), (2, -1.0)):
+        s = 1.0 + sign * 0.5 * shift_px / rim
+        matrix = np.array([[s, 0.0, (1 - s) * u0], [0.0, s, (1 - s) * v0]], np.float32)
+        out[..., channel] = cv2.warpAffine(np.ascontiguousarray(image[..., channel]), matrix, (width, height),
+                                           flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
     return out
 
 

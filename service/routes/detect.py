@@ -24,10 +24,11 @@ from service.schemas import DetectResponse, error_responses
 
 router = APIRouter(tags=["detect"])
 
+# A raw body is recognised by its bytes (JPEG or PNG), whichever of these types it is sent as.
 RAW_TYPES = frozenset({"image/jpeg", "image/jpg", "image/png", "application/octet-stream"})
 _BINARY = {"schema": {"type": "string", "format": "binary"}}
 _REQUEST_BODY = {"required": True, "content": {
-    "image/jpeg": _BINARY, "image/png": _BINARY,
+    "image/jpeg": _BINARY, "image/png": _BINARY, "application/octet-stream": _BINARY,
     "multipart/form-data": {"schema": {"type": "object", "required": ["image"],
                                        "properties": {"image": {"type": "string", "format": "binary"}}}},
 }}

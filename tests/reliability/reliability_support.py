@@ -12,7 +12,6 @@ import collections
 import contextlib
 import datetime
 import http.client
-import importlib.util
 import ipaddress
 import json
 import os
@@ -24,7 +23,6 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 from cryptography import x509
@@ -38,28 +36,11 @@ for folder in (SERVICE_TESTS, REPO_ROOT):  # REPO_ROOT: when a helper runs as a 
     if str(folder) not in sys.path:
         sys.path.insert(0, str(folder))
 
-from live_server import LiveServer  # noqa: E402
 from service_doubles import save_double_model  # noqa: E402
+from service_frames import encode, person_frame  # noqa: E402
+from service_live_server import LiveServer  # noqa: E402
 
 from service.config import Settings  # noqa: E402
-
-
-def _service_conftest() -> ModuleType:
-    """tests/service/conftest.py as a plain module (pytest may have loaded it as `conftest`)."""
-    loaded = sys.modules.get("conftest")
-    if loaded is not None and Path(str(loaded.__file__)).resolve() == SERVICE_TESTS / "conftest.py":
-        return loaded
-    spec = importlib.util.spec_from_file_location("service_tests_conftest", SERVICE_TESTS / "conftest.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
-
-
-_service = _service_conftest()
-person_frame = _service.person_frame
-encode = _service.encode
 
 _LISTENING_RE = re.compile(r"REST listening on (https?)://[^:]+:(\d+)")
 

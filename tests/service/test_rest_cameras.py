@@ -8,7 +8,7 @@ from typing import Any
 
 import httpx
 import pytest
-from live_server import LiveServer
+from service_live_server import LiveServer
 
 from fisheye import FisheyeCamera, camera_to_dict
 from service.config import Settings

@@ -12,8 +12,8 @@ import cv2
 import httpx
 import numpy as np
 import pytest
-from conftest import encode, person_frame
-from live_server import LiveServer
+from service_frames import encode, person_frame
+from service_live_server import LiveServer
 
 from fisheye import FisheyeCamera, camera_to_dict
 from service.config import Settings
@@ -68,8 +68,9 @@ def test_multipart_and_png_give_the_same_answer(server: LiveServer, demo_camera:
     png = encode(truth.bgr, ".png")
     raw = httpx.post(detect_url(server), content=png, headers={"content-type": "image/png"})
     form = httpx.post(detect_url(server), files={"image": ("f.png", encode(truth.bgr, ".png"), "image/png")})
-    assert raw.status_code == form.status_code == 200
-    assert raw.json()["detections"] == form.json()["detections"]
+    octets = httpx.post(detect_url(server), content=png, headers={"content-type": "application/octet-stream"})
+    assert raw.status_code == form.status_code == octets.status_code == 200
+    assert raw.json()["detections"] == form.json()["detections"] == octets.json()["detections"]
     np.testing.assert_allclose(raw.json()["detections"][0]["position_m"], truth.floor_xy_m, atol=0.005)
 
 

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import httpx
 import pytest
-from conftest import encode, person_frame
-from live_server import LiveServer
+from service_frames import encode, person_frame
+from service_live_server import LiveServer
 
 from fisheye import FisheyeCamera
 
@@ -60,7 +60,9 @@ def test_openapi_documents_the_behaviour(live_server: LiveServer) -> None:
             "/v1/cameras/{camera_id}/detect", "/metrics"} <= set(paths)
     assert {"get", "put", "delete"} <= set(paths["/v1/cameras/{camera_id}"])
     detect = paths["/v1/cameras/{camera_id}/detect"]["post"]
-    assert set(detect["requestBody"]["content"]) == {"image/jpeg", "image/png", "multipart/form-data"}
+    assert set(detect["requestBody"]["content"]) == {
+        "image/jpeg", "image/png", "application/octet-stream", "multipart/form-data",
+    }
     assert {"200", "400", "404", "413", "415", "422", "503"} <= set(detect["responses"])
     assert set(detect["responses"]["200"]["content"]) == {"application/json", "image/jpeg"}
     assert {p["name"] for p in detect["parameters"]} == {"camera_id", "min_score", "frame_id", "render"}
@@ -99,3 +101,44 @@ def test_model_without_the_contract_is_refused(tmp_path: Path) -> None:
         onnx.save(model, str(tmp_path / name))
         with pytest.raises(ModelError, match=name):
             OnnxModel(tmp_path / name, SessionThreads(1))
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def test_fishloc_serve_end_to_end(tmp_path: Path, double_model_path: Path,
+                                  demo_camera: FisheyeCamera) -> None:
+    """`fishloc serve` as users run it: start, answer a frame, stop on SIGTERM with exit code 0."""
+    import signal
+    import time
+
+    http_port, grpc_port = _free_port(), _free_port()
+    process = subprocess.Popen(
+        [sys.executable, "-m", "service.cli", "serve", "--model", str(double_model_path), "--http-port",
+         str(http_port), "--grpc-port", str(grpc_port), "--database", str(tmp_path / "cameras.db")],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        url = f"http://127.0.0.1:{http_port}"
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            try:
+                if httpx.get(f"{url}/readyz").status_code == 200:
+                    break
+            except httpx.TransportError:
+                pass
+            time.sleep(0.05)
+        truth = person_frame(demo_camera, (0.9, -1.3), (1024, 1024), disk_radius_px=20)
+        answer = httpx.post(f"{url}/v1/cameras/demo/detect", content=encode(truth.bgr), headers=JPEG)
+        assert answer.status_code == 200
+        assert answer.json()["detections"][0]["position_m"] == pytest.approx([0.9, -1.3], abs=0.005)
+    finally:
+        process.send_signal(signal.SIGTERM)
+        _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 0, stderr
+    assert '"message": "stopped"' in stderr and "POST /v1/cameras/demo/detect 200" in stderr

@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import encode, person_frame
 from service_doubles import (
     BLOB_SCORE,
     BLOB_WH,
@@ -21,6 +20,7 @@ from service_doubles import (
     DEFAULT_MIN_SCORE,
     INPUT_SIZE,
 )
+from service_frames import encode, person_frame
 
 from fisheye import FisheyeCamera, camera_from_dict, camera_to_dict, cxcywh_to_corners, foot_points
 from service.frame_decode import FrameError

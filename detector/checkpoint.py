@@ -1,0 +1,104 @@
+"""Checkpoint files: the network's config and weights, plus the training state that resumes exactly.
+
+A checkpoint is a `torch.save`d dict with `format == "fishloc-checkpoint"`. Anything else (a file
+that is not a checkpoint, a truncated file, weights that do not fit the stored config) raises
+`CheckpointError` with a message that says what is wrong.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from detector.model import DetectorConfig, FishLocNet, build_model
+
+CHECKPOINT_FORMAT = "fishloc-checkpoint"
+CHECKPOINT_VERSION = 1
+
+
+class CheckpointError(ValueError):
+    """A checkpoint that cannot be used; the message names the file and the problem."""
+
+
+@dataclass
+class ModelInfo:
+    """What a model says about itself (carried into the ONNX metadata)."""
+
+    model_version: str = "0.0.0"
+    trained_on: str = "untrained"
+    default_min_score: float = 0.3
+
+
+@dataclass
+class Checkpoint:
+    config: DetectorConfig
+    model_state: dict[str, Any]
+    info: ModelInfo = field(default_factory=ModelInfo)
+    training_state: dict[str, Any] = field(default_factory=dict)
+
+    def build(self, path: str | Path = "<memory>") -> FishLocNet:
+        """The network with these weights, in eval mode."""
+        model = build_model(self.config)
+        try:
+            model.load_state_dict(self.model_state, strict=True)
+        except RuntimeError as error:
+            first_lines = "; ".join(str(error).splitlines()[:3])
+            raise CheckpointError(
+                f"checkpoint {path}: weights do not fit its network config ({first_lines})"
+            ) from None
+        return model.eval()
+
+
+def save_checkpoint(path: str | Path, checkpoint: Checkpoint) -> None:
+    """Write atomically (a crash mid-write leaves the previous file intact)."""
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    record = {
+        "format": CHECKPOINT_FORMAT,
+        "version": CHECKPOINT_VERSION,
+        "config": checkpoint.config.to_dict(),
+        "model": checkpoint.model_state,
+        "info": vars(checkpoint.info),
+        "training": checkpoint.training_state,
+    }
+    temporary = target.with_name(target.name + ".tmp")
+    torch.save(record, temporary)
+    os.replace(temporary, target)
+
+
+def load_checkpoint(path: str | Path) -> Checkpoint:
+    """Read a checkpoint; CheckpointError for anything that is not a usable FishLoc checkpoint."""
+    file = Path(path)
+    if not file.is_file():
+        raise CheckpointError(f"checkpoint {file} does not exist")
+    try:
+        # Our own files also hold optimizer and RNG states (numpy arrays), hence weights_only=False.
+        record = torch.load(file, map_location="cpu", weights_only=False)
+    except Exception as error:  # torch raises many types for damaged files
+        raise CheckpointError(
+            f"checkpoint {file} cannot be read ({type(error).__name__}: {error}); "
+            "is it a FishLoc checkpoint written by `fishloc train`?"
+        ) from None
+    if not isinstance(record, dict) or record.get("format") != CHECKPOINT_FORMAT:
+        raise CheckpointError(f"{file} is not a FishLoc checkpoint (no '{CHECKPOINT_FORMAT}' marker)")
+    if record.get("version") != CHECKPOINT_VERSION:
+        raise CheckpointError(f"{file} has checkpoint version {record.get('version')}, "
+                              f"this FishLoc reads version {CHECKPOINT_VERSION}")
+    try:
+        config = DetectorConfig.from_dict(dict(record["config"]))
+        state = dict(record["model"])
+    except (KeyError, TypeError, ValueError) as error:
+        raise CheckpointError(f"checkpoint {file} has a damaged config or weights: {error}") from None
+    info_record = record.get("info") or {}
+    info = ModelInfo(**{k: v for k, v in info_record.items() if k in ModelInfo.__dataclass_fields__})
+    return Checkpoint(config, state, info, dict(record.get("training") or {}))
+
+
+def load_model(path: str | Path) -> tuple[FishLocNet, Checkpoint]:
+    """The network of a checkpoint file (eval mode) and the checkpoint itself."""
+    checkpoint = load_checkpoint(path)
+    return checkpoint.build(path), checkpoint

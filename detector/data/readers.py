@@ -1,0 +1,228 @@
+"""Dataset readers: FishLoc/LOAF-style and CEPDOF/WEPDTOF annotation files -> typed frame records.
+
+FishLoc/LOAF-style files (what `fishloc synth` writes) give each person a radius-aligned
+`rotated_box: [cx, cy, w, h]` and a floor position `location_m`, and each image its camera.
+CEPDOF/WEPDTOF files give `bbox: [cx, cy, w, h, angle_deg]` and no camera; their boxes are turned
+radius-aligned about the image centre. `read_dataset` tells the two apart by their annotations.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fisheye import FisheyeCamera, camera_from_dict, camera_to_dict, cepdof_to_radius_aligned
+from fisheye.boxes import cxcywh_to_corners
+
+FloatArray = NDArray[np.float64]
+ANNOTATIONS_FILE = "annotations.json"
+
+
+class DatasetFormatError(ValueError):
+    """An annotation file that neither reader understands; the message says where."""
+
+
+@dataclass(frozen=True)
+class FrameAnnotations:
+    """One frame and its people: `boxes_cxcywh` (N, 4) frame px radius-aligned about
+    `principal_point`; `locations_m` (N, 2) floor metres, `distances_m` (N,) metres from the nadir
+    and `visible_fraction` (N,), NaN where the file does not say. `crowd_cxcywh` (M, 4) are the
+    boxes marked `iscrowd` (people too hidden to count): evaluation neither rewards nor penalises
+    detections on them, training leaves them out."""
+
+    path: Path
+    image_id: int | str
+    width: int
+    height: int
+    camera: FisheyeCamera | None
+    scene_id: str
+    split: str
+    boxes_cxcywh: FloatArray
+    locations_m: FloatArray
+    distances_m: FloatArray
+    visible_fraction: FloatArray
+    crowd_cxcywh: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
+
+    def __post_init__(self) -> None:
+        n = len(self.boxes_cxcywh)
+        if (self.boxes_cxcywh.shape != (n, 4) or self.locations_m.shape != (n, 2)
+                or self.distances_m.shape != (n,) or self.visible_fraction.shape != (n,)):
+            raise ValueError(
+                f"{self.path}: arrays disagree: boxes {self.boxes_cxcywh.shape}, locations "
+                f"{self.locations_m.shape}, distances {self.distances_m.shape}, "
+                f"visible {self.visible_fraction.shape}"
+            )
+        if self.camera is not None and tuple(self.camera.image_size) != (self.width, self.height):
+            raise ValueError(f"{self.path}: camera is calibrated at {self.camera.image_size}, "
+                             f"frame is {self.width}x{self.height}; scale it with scaled_to")
+
+    @property
+    def principal_point(self) -> tuple[float, float]:
+        """The camera's principal point, or the frame centre when the frame has no camera."""
+        if self.camera is not None:
+            return self.camera.principal_point
+        return (self.width - 1) / 2.0, (self.height - 1) / 2.0
+
+    def __len__(self) -> int:
+        return len(self.boxes_cxcywh)
+
+
+def _numbers(record: Mapping[str, Any], key: str, count: int, where: str) -> list[float] | None:
+    value = record.get(key)
+    if value is None:
+        return None
+    if not isinstance(value, Sequence) or len(value) != count:
+        raise DatasetFormatError(f"{where}: {key} must hold {count} numbers, got {value!r}")
+    try:
+        return [float(v) for v in value]
+    except (TypeError, ValueError):
+        raise DatasetFormatError(f"{where}: {key} must hold numbers, got {value!r}") from None
+
+
+def sniff_format(data: Mapping[str, Any]) -> str:
+    """'fishloc' (rotated_box + location_m) or 'cepdof' (5-number bbox) of a loaded COCO dict."""
+    annotations = data.get("annotations") or []
+    if any("rotated_box" in a for a in annotations):
+        return "fishloc"
+    if any(isinstance(a.get("bbox"), Sequence) and len(a["bbox"]) == 5 for a in annotations):
+        return "cepdof"
+    if annotations:
+        raise DatasetFormatError("annotations have neither rotated_box nor a 5-number bbox")
+    # No people at all: the images alone decide (FishLoc images carry cameras).
+    return "fishloc" if any("camera" in i for i in data.get("images") or []) else "cepdof"
+
+
+def _frame(image: Mapping[str, Any], annotations: list[Mapping[str, Any]], folder: Path,
+           file_format: str, source: Path) -> FrameAnnotations:
+    where = f"{source} image {image.get('id')!r}"
+    try:
+        width, height = int(image["width"]), int(image["height"])
+        path = folder / str(image["file_name"])
+    except (KeyError, TypeError, ValueError) as error:
+        raise DatasetFormatError(f"{where}: needs file_name, width and height ({error})") from None
+    camera = None
+    if image.get("camera") is not None:
+        try:
+            camera = camera_from_dict(image["camera"]).scaled_to((width, height))
+        except ValueError as error:
+            raise DatasetFormatError(f"{where}: {error}") from None
+    principal = camera.principal_point if camera is not None else ((width - 1) / 2, (height - 1) / 2)
+    boxes, locations, distances, visible, crowd = [], [], [], [], []
+    for index, annotation in enumerate(annotations):
+        at = f"{where} annotation {annotation.get('id', index)!r}"
+        if file_format == "fishloc":
+            box = _numbers(annotation, "rotated_box", 4, at)
+            if box is None:
+                raise DatasetFormatError(f"{at}: no rotated_box")
+        else:
+            raw = _numbers(annotation, "bbox", 5, at)
+            if raw is None:
+                raise DatasetFormatError(f"{at}: no bbox")
+            box = cepdof_to_radius_aligned(np.asarray([raw]), principal)[0].tolist()
+        if annotation.get("iscrowd", 0):
+            crowd.append(box)
+            continue
+        location = _numbers(annotation, "location_m", 2, at)
+        xy = np.asarray(location if location is not None else [np.nan, np.nan])
+        distance = annotation.get("distance_m")
+        boxes.append(box)
+        locations.append(xy)
+        distances.append(float(distance) if distance is not None else float(np.hypot(*xy)))
+        fraction = annotation.get("visible_fraction")
+        visible.append(float(fraction) if fraction is not None else np.nan)
+    n = len(boxes)
+    return FrameAnnotations(
+        path=path,
+        image_id=image.get("id", path.stem),
+        width=width,
+        height=height,
+        camera=camera,
+        scene_id=str(image.get("scene_id", "")),
+        split=str(image.get("split", "")),
+        boxes_cxcywh=np.asarray(boxes, dtype=np.float64).reshape(n, 4),
+        locations_m=np.asarray(locations, dtype=np.float64).reshape(n, 2),
+        distances_m=np.asarray(distances, dtype=np.float64).reshape(n),
+        visible_fraction=np.asarray(visible, dtype=np.float64).reshape(n),
+        crowd_cxcywh=np.asarray(crowd, dtype=np.float64).reshape(-1, 4),
+    )
+
+
+def read_dataset(path: str | Path) -> list[FrameAnnotations]:
+    """Every frame of an annotation file (or of a folder's `annotations.json`), in file order."""
+    source = Path(path)
+    if source.is_dir():
+        source = source / ANNOTATIONS_FILE
+    try:
+        data = json.loads(source.read_text(encoding="utf-8"))
+    except OSError as error:
+        raise DatasetFormatError(f"cannot read {source}: {error.strerror}") from None
+    except json.JSONDecodeError as error:
+        raise DatasetFormatError(f"{source} is not valid JSON: {error}") from None
+    if not isinstance(data, Mapping) or not isinstance(data.get("images"), list):
+        raise DatasetFormatError(f"{source} is not a COCO-style file (no 'images' list)")
+    file_format = sniff_format(data)
+    by_image: dict[Any, list[Mapping[str, Any]]] = {}
+    for annotation in data.get("annotations") or []:
+        if int(annotation.get("category_id", 1)) == 1:
+            by_image.setdefault(annotation.get("image_id"), []).append(annotation)
+    return [_frame(image, by_image.get(image.get("id"), []), source.parent, file_format, source)
+            for image in data["images"]]
+
+
+def _annotation_record(frame: FrameAnnotations, index: int, next_id: int) -> dict[str, Any]:
+    box = frame.boxes_cxcywh[index]
+    corners = cxcywh_to_corners(box[None], frame.principal_point)[0]
+    x0, y0 = corners.min(axis=0)
+    x1, y1 = corners.max(axis=0)
+    record: dict[str, Any] = {
+        "id": next_id,
+        "image_id": frame.image_id,
+        "category_id": 1,
+        "rotated_box": [float(v) for v in box],
+        "bbox": [float(x0), float(y0), float(x1 - x0), float(y1 - y0)],
+        "area": float(box[2] * box[3]),
+        "iscrowd": 0,
+    }
+    if np.all(np.isfinite(frame.locations_m[index])):
+        record["location_m"] = [float(v) for v in frame.locations_m[index]]
+    if np.isfinite(frame.distances_m[index]):
+        record["distance_m"] = float(frame.distances_m[index])
+    if np.isfinite(frame.visible_fraction[index]):
+        record["visible_fraction"] = float(frame.visible_fraction[index])
+    return record
+
+
+def write_dataset(frames: Sequence[FrameAnnotations], path: str | Path,
+                  info: Mapping[str, Any] | None = None) -> None:
+    """Write frames as a FishLoc-format annotation file; image paths are stored relative to it."""
+    target = Path(path)
+    images: list[dict[str, Any]] = []
+    annotations: list[dict[str, Any]] = []
+    for frame in frames:
+        image: dict[str, Any] = {
+            "id": frame.image_id,
+            "file_name": str(Path(frame.path).resolve().relative_to(target.parent.resolve()))
+            if Path(frame.path).resolve().is_relative_to(target.parent.resolve()) else str(frame.path),
+            "width": frame.width,
+            "height": frame.height,
+            "scene_id": frame.scene_id,
+            "split": frame.split,
+        }
+        if frame.camera is not None:
+            image["camera"] = camera_to_dict(frame.camera)
+        images.append(image)
+        for index in range(len(frame)):
+            annotations.append(_annotation_record(frame, index, len(annotations) + 1))
+        for box in frame.crowd_cxcywh:
+            annotations.append({"id": len(annotations) + 1, "image_id": frame.image_id, "category_id": 1,
+                                "rotated_box": [float(v) for v in box], "area": float(box[2] * box[3]),
+                                "iscrowd": 1})
+    document = {"info": dict(info or {}), "categories": [{"id": 1, "name": "person"}],
+                "images": images, "annotations": annotations}
+    target.write_text(json.dumps(document, indent=1) + "\n", encoding="utf-8")

@@ -1,0 +1,171 @@
+"""`fishloc eval`: a checkpoint or ONNX model on an annotated dataset -> metrics JSON and plots.
+
+Both kinds of model go through the same letterbox and post-processing as the service
+(`exporter.onnx_runner`): frames are letterboxed to the model input, boxes come back to frame
+pixels. Metrics are those of `detector.metrics`, overall and per split (seen/unseen) when the data
+has more than one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+from tqdm import tqdm
+
+from detector.checkpoint import CheckpointError, load_checkpoint
+from detector.data.dataset import PAD_VALUE, load_rgb
+from detector.data.readers import DatasetFormatError, FrameAnnotations, read_dataset
+from detector.metrics import EvalFrame, compute_metrics, localisation_points, pr_curve
+from detector.plots import plot_pe_by_distance, plot_pr_curve
+from exporter.graph import ContractModel
+from exporter.onnx_runner import FrameDetections, ModelFormatError, OnnxDetector, postprocess
+from fisheye import Letterbox
+
+EVAL_MIN_SCORE = 0.01  # detections kept for AP (the PR curve runs down to here)
+
+
+class Predictor(Protocol):
+    default_min_score: float
+
+    def detect(self, frames_rgb: Sequence[NDArray[np.uint8]], min_score: float) -> list[FrameDetections]:
+        ...
+
+
+class OnnxPredictor:
+    def __init__(self, path: str | Path, threads: int | None = None) -> None:
+        self.detector = OnnxDetector(path, threads)
+        self.default_min_score = self.detector.metadata.default_min_score
+
+    def detect(self, frames_rgb: Sequence[NDArray[np.uint8]], min_score: float) -> list[FrameDetections]:
+        return self.detector.detect(frames_rgb, min_score)
+
+
+class TorchPredictor:
+    """A torch model through the ONNX contract's module, with the runtime's pre/post-processing."""
+
+    def __init__(self, model: ContractModel, default_min_score: float) -> None:
+        self.model = model.eval()
+        self.default_min_score = default_min_score
+
+    def detect(self, frames_rgb: Sequence[NDArray[np.uint8]], min_score: float) -> list[FrameDetections]:
+        if not frames_rgb:
+            return []
+        size = self.model.input_size
+        letterboxes = [Letterbox.fit((f.shape[1], f.shape[0]), size) for f in frames_rgb]
+        inputs = np.stack([lb.apply(f, PAD_VALUE) for lb, f in zip(letterboxes, frames_rgb, strict=True)])
+        device = next(self.model.parameters()).device
+        with torch.no_grad():
+            boxes, scores = self.model(torch.from_numpy(inputs).to(device))
+        return [postprocess(boxes[i].cpu().numpy(), scores[i].cpu().numpy(), lb, min_score)
+                for i, lb in enumerate(letterboxes)]
+
+
+def load_predictor(path: str | Path, device: str = "cpu") -> Predictor:
+    """An ONNX file (by its .onnx suffix) or a training checkpoint."""
+    if Path(path).suffix.lower() == ".onnx":
+        return OnnxPredictor(path)
+    checkpoint = load_checkpoint(path)
+    model = ContractModel(checkpoint.build(path)).to(device)
+    return TorchPredictor(model, checkpoint.info.default_min_score)
+
+
+@dataclass
+class Evaluation:
+    frames: list[EvalFrame]
+    metrics: dict[str, Any]
+
+
+def eval_frames(predictor: Predictor, frames: Sequence[FrameAnnotations], batch_size: int = 8,
+                progress: bool = False) -> list[EvalFrame]:
+    """Run the predictor over annotated frames -> EvalFrames (detections with score ≥ 0.01)."""
+    result: list[EvalFrame] = []
+    batches = range(0, len(frames), batch_size)
+    for start in tqdm(batches, desc="eval", unit="batch", disable=not progress):
+        chunk = frames[start:start + batch_size]
+        found = predictor.detect([load_rgb(f) for f in chunk], EVAL_MIN_SCORE)
+        for frame, detections in zip(chunk, found, strict=True):
+            result.append(EvalFrame(
+                gt_boxes=frame.boxes_cxcywh, gt_locations_m=frame.locations_m,
+                gt_distances_m=frame.distances_m, det_boxes=detections.boxes_cxcywh,
+                det_scores=detections.scores, principal_point=frame.principal_point,
+                camera=frame.camera, split=frame.split, crowd_boxes=frame.crowd_cxcywh))
+    return result
+
+
+def summarise(frames: Sequence[EvalFrame], min_score: float) -> dict[str, Any]:
+    """Overall metrics plus a `splits` entry per split when there are several."""
+    metrics: dict[str, Any] = dict(compute_metrics(frames, min_score))
+    metrics["min_score"] = min_score
+    splits = sorted({f.split for f in frames})
+    if len(splits) > 1:
+        metrics["splits"] = {name: compute_metrics([f for f in frames if f.split == name], min_score)
+                             for name in splits}
+    return metrics
+
+
+def evaluate(predictor: Predictor, frames: Sequence[FrameAnnotations], progress: bool = False
+             ) -> Evaluation:
+    evaluated = eval_frames(predictor, frames, progress=progress)
+    return Evaluation(evaluated, summarise(evaluated, predictor.default_min_score))
+
+
+def write_plots(evaluation: Evaluation, folder: Path, title: str) -> list[Path]:
+    folder.mkdir(parents=True, exist_ok=True)
+    precision, recall, _ = pr_curve(evaluation.frames)
+    pr_path, pe_path = folder / "pr_curve.png", folder / "pe_by_distance.png"
+    plot_pr_curve(precision, recall, pr_path, f"{title}: PR at IoU 0.5")
+    distances, foot, centre = localisation_points(evaluation.frames)
+    plot_pe_by_distance(distances, foot, centre, pe_path, f"{title}: localisation error")
+    return [pr_path, pe_path]
+
+
+def json_safe(value: Any) -> Any:
+    """NaN and infinities -> None, recursively (strict JSON has no NaN)."""
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--model", required=True, help="checkpoint (.pt) or ONNX model (.onnx)")
+    parser.add_argument("--data", required=True, help="annotations.json (FishLoc/LOAF or CEPDOF format)")
+    parser.add_argument("--json", required=True, help="where to write the metrics")
+    parser.add_argument("--plots", default=None, help="folder for pr_curve.png and pe_by_distance.png")
+    parser.add_argument("--min-score", type=float, default=None,
+                        help="threshold of precision/recall (default: the model's own)")
+    parser.add_argument("--limit", type=int, default=None, help="evaluate the first N frames only")
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        predictor = load_predictor(args.model)
+        frames = read_dataset(args.data)
+    except (CheckpointError, ModelFormatError, DatasetFormatError) as error:
+        print(f"fishloc eval: {error}", file=sys.stderr)
+        return 2
+    if args.limit is not None:
+        frames = frames[:args.limit]
+    if args.min_score is not None:
+        predictor.default_min_score = args.min_score
+    evaluation = evaluate(predictor, frames, progress=True)
+    metrics = json_safe({**evaluation.metrics, "model": str(args.model), "data": str(args.data)})
+    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.json).write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
+    if args.plots:
+        write_plots(evaluation, Path(args.plots), Path(args.model).name)
+    keys = ("mAP", "AP50", "AP75", "AP_near", "AP_mid", "AP_far", "mPE", "mPE_center", "PE_far",
+            "precision", "recall")
+    print(json.dumps({k: metrics.get(k) for k in keys}))
+    return 0

@@ -1,0 +1,244 @@
+"""Detection and localisation metrics of LOAF, on radius-aligned boxes (pure numpy).
+
+- AP: COCO-style, 101-point interpolated, greedy matching by score with rotated-box IoU; `mAP` is the
+  mean over IoU 0.50:0.05:0.95, `AP50`, `AP75` single thresholds.
+- AP_near / AP_mid / AP_far: AP50 restricted to people 0–10, 10–20 and > 20 m from the nadir (GT
+  distance). As COCO does for area ranges, people outside the range are ignored (detections matched
+  to them count neither way) and so are unmatched detections whose own floor distance (foot point)
+  lies outside it.
+- PE: Euclidean floor error (m) of detections matched at IoU 0.5 to people with known positions,
+  placed by their foot point (`mPE`, `PE_near/mid/far` by GT distance) or by their box centre
+  (`mPE_center`, ...).
+- precision / recall at one score threshold, matched at IoU 0.5.
+
+Crowd boxes (people marked `iscrowd`, too hidden to count) are ignore regions: a detection that
+matches no person but overlaps a crowd box at the IoU threshold counts neither way.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fisheye import FisheyeCamera, foot_points, rotated_iou
+
+FloatArray = NDArray[np.float64]
+IOU_THRESHOLDS = np.round(np.arange(0.5, 0.951, 0.05), 2)
+DISTANCE_BINS_M: dict[str, tuple[float, float]] = {
+    "near": (0.0, 10.0), "mid": (10.0, 20.0), "far": (20.0, math.inf)}
+RECALL_POINTS = np.linspace(0.0, 1.0, 101)
+MAX_DETECTIONS = 100
+
+
+@dataclass(frozen=True)
+class EvalFrame:
+    """Ground truth and detections of one frame, all boxes in frame px about `principal_point`."""
+
+    gt_boxes: FloatArray  # (G, 4)
+    gt_locations_m: FloatArray  # (G, 2), NaN when unknown
+    gt_distances_m: FloatArray  # (G,), NaN when unknown
+    det_boxes: FloatArray  # (D, 4)
+    det_scores: FloatArray  # (D,)
+    principal_point: tuple[float, float]
+    camera: FisheyeCamera | None = None
+    split: str = ""
+    crowd_boxes: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
+
+    def __post_init__(self) -> None:
+        g, d = len(self.gt_boxes), len(self.det_boxes)
+        if (self.gt_boxes.shape != (g, 4) or self.gt_locations_m.shape != (g, 2)
+                or self.gt_distances_m.shape != (g,) or self.det_boxes.shape != (d, 4)
+                or self.det_scores.shape != (d,)):
+            raise ValueError("EvalFrame arrays disagree in shape")
+
+
+@dataclass
+class FrameMatch:
+    """One frame's detections sorted by descending score (`order`), their IoU with the people
+    `iou` (D, G) and their largest IoU with any crowd box `crowd_iou` (D,)."""
+
+    order: NDArray[np.int64]
+    iou: FloatArray
+    crowd_iou: FloatArray
+
+    def ignored(self, matched: NDArray[np.int64], threshold: float) -> NDArray[np.bool_]:
+        """(D,) unmatched detections that sit on a crowd box."""
+        return (matched < 0) & (self.crowd_iou >= threshold)
+
+
+def greedy_match(iou: FloatArray, threshold: float, gt_ignore: NDArray[np.bool_] | None = None
+                 ) -> NDArray[np.int64]:
+    """(D, G) IoU of score-sorted detections -> (D,) matched GT index or -1 (COCO's greedy rule:
+    each detection takes the unmatched, non-ignored GT of highest IoU ≥ threshold, falling back to
+    an ignored GT only when no regular one fits)."""
+    D, G = iou.shape
+    ignore = np.zeros(G, dtype=bool) if gt_ignore is None else gt_ignore
+    taken = np.zeros(G, dtype=bool)
+    matched = np.full(D, -1, dtype=np.int64)
+    for d in range(D):
+        best, best_iou = -1, threshold - 1e-12
+        for pass_ignored in (False, True):
+            for g in range(G):
+                if taken[g] or ignore[g] != pass_ignored or iou[d, g] < best_iou:
+                    continue
+                best, best_iou = g, iou[d, g]
+            if best >= 0:
+                break
+        if best >= 0:
+            matched[d] = best
+            taken[best] = True
+    return matched
+
+
+def average_precision(scores: FloatArray, true_positive: NDArray[np.bool_], num_gt: int) -> float:
+    """COCO 101-point interpolated AP; NaN when there is no ground truth."""
+    if num_gt == 0:
+        return float("nan")
+    order = np.argsort(-scores, kind="stable")
+    tp = true_positive[order].astype(np.float64)
+    tp_cum, fp_cum = np.cumsum(tp), np.cumsum(1.0 - tp)
+    recall = tp_cum / num_gt
+    precision = tp_cum / np.maximum(tp_cum + fp_cum, np.finfo(np.float64).eps)
+    envelope = np.maximum.accumulate(precision[::-1])[::-1] if len(precision) else precision
+    index = np.searchsorted(recall, RECALL_POINTS, side="left")
+    sampled = np.array([envelope[i] if i < len(envelope) else 0.0 for i in index])
+    return float(sampled.mean())
+
+
+def _prepare(frame: EvalFrame) -> FrameMatch:
+    order = np.argsort(-frame.det_scores, kind="stable")[:MAX_DETECTIONS]
+    iou = rotated_iou(frame.det_boxes[order], frame.gt_boxes, frame.principal_point)
+    crowd = rotated_iou(frame.det_boxes[order], frame.crowd_boxes, frame.principal_point)
+    crowd_iou = crowd.max(axis=1) if crowd.size else np.zeros(len(order))
+    return FrameMatch(order=order, iou=iou.reshape(len(order), len(frame.gt_boxes)), crowd_iou=crowd_iou)
+
+
+def _det_distances(frame: EvalFrame, order: NDArray[np.int64]) -> FloatArray:
+    if frame.camera is None:
+        return np.full(len(order), np.nan)
+    feet = foot_points(frame.det_boxes[order], frame.camera.principal_point)
+    return frame.camera.floor_positions(feet).distance_m
+
+
+def _ap_at(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch], threshold: float,
+           distance_range: tuple[float, float] | None = None) -> float:
+    scores, positives, num_gt = [], [], 0
+    for frame, match in zip(frames, prepared, strict=True):
+        if distance_range is None:
+            ignore = np.zeros(len(frame.gt_boxes), dtype=bool)
+        else:
+            low, high = distance_range
+            d = frame.gt_distances_m
+            ignore = ~((d >= low) & (d < high))  # unknown distances are ignored too
+        matched = greedy_match(match.iou, threshold, ignore)
+        keep = ~match.ignored(matched, threshold)
+        keep[matched >= 0] = ~ignore[matched[matched >= 0]]
+        if distance_range is not None:
+            distances = _det_distances(frame, match.order)
+            outside = ~((distances >= distance_range[0]) & (distances < distance_range[1]))
+            keep &= ~((matched < 0) & outside)
+        scores.append(frame.det_scores[match.order][keep])
+        positives.append((matched >= 0)[keep])
+        num_gt += int((~ignore).sum())
+    if not scores:
+        return float("nan")
+    return average_precision(np.concatenate(scores), np.concatenate(positives), num_gt)
+
+
+def _localisation_errors(frame: EvalFrame, match: FrameMatch, use_foot: bool
+                         ) -> tuple[FloatArray, FloatArray]:
+    """(M,) errors m and (M,) GT distances m of the IoU-0.5 matches with known positions."""
+    if frame.camera is None:
+        return np.zeros(0), np.zeros(0)
+    matched = greedy_match(match.iou, 0.5)
+    det_index = match.order[matched >= 0]
+    gt_index = matched[matched >= 0]
+    boxes = frame.det_boxes[det_index]
+    points = foot_points(boxes, frame.camera.principal_point) if use_foot else boxes[:, :2]
+    predicted = frame.camera.pixels_to_floor(points.reshape(-1, 2))
+    truth = frame.gt_locations_m[gt_index]
+    error = np.linalg.norm(predicted - truth, axis=1)
+    valid = np.isfinite(error)
+    return error[valid], frame.gt_distances_m[gt_index][valid]
+
+
+def _mean(values: FloatArray) -> float:
+    return float(values.mean()) if len(values) else float("nan")
+
+
+def precision_recall_at(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch], min_score: float
+                        ) -> tuple[float, float]:
+    true_pos = n_det = n_gt = 0
+    for frame, match in zip(frames, prepared, strict=True):
+        matched = greedy_match(match.iou, 0.5)
+        above = (frame.det_scores[match.order] >= min_score) & ~match.ignored(matched, 0.5)
+        true_pos += int((matched[above] >= 0).sum())
+        n_det += int(above.sum())
+        n_gt += len(frame.gt_boxes)
+    precision = true_pos / n_det if n_det else float("nan")
+    recall = true_pos / n_gt if n_gt else float("nan")
+    return precision, recall
+
+
+def pr_curve(frames: Sequence[EvalFrame]) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Precision, recall and score thresholds (each (D,)) at IoU 0.5 over all detections."""
+    scores, positives, num_gt = [], [], 0
+    for frame in frames:
+        match = _prepare(frame)
+        matched = greedy_match(match.iou, 0.5)
+        keep = ~match.ignored(matched, 0.5)
+        scores.append(frame.det_scores[match.order][keep])
+        positives.append(matched[keep] >= 0)
+        num_gt += len(frame.gt_boxes)
+    all_scores = np.concatenate(scores) if scores else np.zeros(0)
+    order = np.argsort(-all_scores, kind="stable")
+    tp = np.concatenate(positives)[order].astype(np.float64) if scores else np.zeros(0)
+    tp_cum = np.cumsum(tp)
+    precision = tp_cum / np.arange(1, len(tp) + 1)
+    recall = tp_cum / max(num_gt, 1)
+    return precision, recall, all_scores[order]
+
+
+def compute_metrics(frames: Sequence[EvalFrame], min_score: float) -> dict[str, float]:
+    """Every metric of the module docstring for one set of frames (NaN where undefined)."""
+    prepared = [_prepare(frame) for frame in frames]
+    per_threshold = [_ap_at(frames, prepared, float(t)) for t in IOU_THRESHOLDS]
+    result: dict[str, float] = {
+        "mAP": float(np.mean(per_threshold)),
+        "AP50": per_threshold[0],
+        "AP75": per_threshold[5],
+    }
+    for name, distance_range in DISTANCE_BINS_M.items():
+        result[f"AP_{name}"] = _ap_at(frames, prepared, 0.5, distance_range)
+    for suffix, use_foot in (("", True), ("_center", False)):
+        pairs = [_localisation_errors(f, m, use_foot) for f, m in zip(frames, prepared, strict=True)]
+        errors = np.concatenate([p[0] for p in pairs]) if pairs else np.zeros(0)
+        distances = np.concatenate([p[1] for p in pairs]) if pairs else np.zeros(0)
+        result[f"mPE{suffix}"] = _mean(errors)
+        for name, (low, high) in DISTANCE_BINS_M.items():
+            result[f"PE_{name}{suffix}"] = _mean(errors[(distances >= low) & (distances < high)])
+        result[f"PE_matches{suffix}"] = float(len(errors))
+    result["precision"], result["recall"] = precision_recall_at(frames, prepared, min_score)
+    result["num_frames"] = float(len(frames))
+    result["num_gt"] = float(sum(len(f.gt_boxes) for f in frames))
+    return result
+
+
+def localisation_points(frames: Sequence[EvalFrame]) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """GT distance (M,), foot-point error (M,) and centre error (M,) of every IoU-0.5 match."""
+    distances, foot, centre = [], [], []
+    for frame in frames:
+        match = _prepare(frame)
+        foot_error, distance = _localisation_errors(frame, match, True)
+        centre_error, _ = _localisation_errors(frame, match, False)
+        if len(foot_error) == len(centre_error):
+            distances.append(distance)
+            foot.append(foot_error)
+            centre.append(centre_error)
+    if not distances:
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    return np.concatenate(distances), np.concatenate(foot), np.concatenate(centre)

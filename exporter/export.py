@@ -1,0 +1,185 @@
+"""`fishloc export`: a checkpoint -> an ONNX model of the FishLoc contract, verified on every run.
+
+The graph takes `image` uint8 (N, S, S, 3) RGB (dynamic N) and returns `boxes` float32 (N, K, 4)
+radius-aligned `cxcywh` in input pixels, aligned about the input centre ((S - 1) / 2, (S - 1) / 2),
+and `scores` float32 (N, K) sorted descending, with the `fishloc.*` metadata of DESIGN.md. Each
+export is checked with `onnx.checker` and for parity with torch; `--int8` adds static QDQ
+quantisation calibrated on frames from `--calibration-data`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import logging
+import sys
+import tempfile
+import warnings
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import onnx
+import torch
+from numpy.typing import NDArray
+
+from detector.checkpoint import Checkpoint, CheckpointError, load_checkpoint
+from exporter.graph import ContractModel
+from exporter.onnx_runner import BOX_FORMAT, OnnxDetector
+from exporter.parity import ParityReport, check_parity, synthetic_parity_frames
+from exporter.quantize import check_integer_convolutions, quantize_int8
+
+DEFAULT_OPSET = 18
+PAD_VALUE = 0
+_IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp"}
+
+
+@dataclass(frozen=True)
+class ExportReport:
+    output: str
+    input_size: int
+    opset: int
+    max_detections: int
+    parity: ParityReport
+    int8: bool
+    integer_ops: dict[str, int] | None = None
+
+
+def _metadata(checkpoint: Checkpoint, input_size: int) -> dict[str, str]:
+    info = checkpoint.info
+    return {
+        "fishloc.input_size": str(input_size),
+        "fishloc.pad_value": str(PAD_VALUE),
+        "fishloc.box_format": BOX_FORMAT,
+        "fishloc.model_name": checkpoint.config.model_name,
+        "fishloc.model_version": info.model_version,
+        "fishloc.trained_on": info.trained_on,
+        "fishloc.default_min_score": f"{info.default_min_score:g}",
+    }
+
+
+def contract_model(checkpoint: Checkpoint, input_size: int | None = None,
+                   source: str = "<memory>") -> ContractModel:
+    """The network of `checkpoint` wrapped to the ONNX contract, at `input_size` (default: trained)."""
+    if input_size is not None and input_size != checkpoint.config.input_size:
+        if input_size % 32 != 0:
+            raise ValueError(f"--input-size must be a multiple of 32, got {input_size}")
+        checkpoint = replace(checkpoint, config=replace(checkpoint.config, input_size=input_size))
+    return ContractModel(checkpoint.build(source)).eval()
+
+
+def _torch_to_onnx(model: ContractModel, path: Path, opset: int) -> None:
+    size = model.input_size
+    example = torch.zeros((2, size, size, 3), dtype=torch.uint8)
+    batch = torch.export.Dim("batch", min=1, max=1024)
+    # The exporter prints progress and torch-internal deprecation notices; keep the command's output ours.
+    with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()):
+        warnings.simplefilter("ignore")
+        logging.getLogger("torch.onnx").setLevel(logging.ERROR)
+        torch.onnx.export(model, (example,), str(path), input_names=["image"],
+                          output_names=["boxes", "scores"], opset_version=opset, dynamo=True,
+                          dynamic_shapes={"image": {0: batch}}, external_data=False, verbose=False)
+
+
+def _write_metadata(path: Path, metadata: dict[str, str]) -> None:
+    proto = onnx.load(str(path))
+    del proto.metadata_props[:]
+    for key, value in metadata.items():
+        proto.metadata_props.add(key=key, value=value)
+    onnx.checker.check_model(proto, full_check=True)
+    onnx.save(proto, str(path))
+
+
+def load_calibration_frames(folder: str | Path, input_size: int, limit: int = 64
+                            ) -> NDArray[np.uint8]:
+    """(N, S, S, 3) letterboxed RGB frames from the images of a folder (sorted by name)."""
+    import cv2
+
+    from fisheye import Letterbox
+
+    files = sorted(p for p in Path(folder).iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES)[:limit]
+    if not files:
+        raise ValueError(f"no images (.jpg, .png, .bmp) in calibration folder {folder}")
+    frames = []
+    for file in files:
+        bgr = cv2.imread(str(file), cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise ValueError(f"cannot decode calibration image {file}")
+        rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+        letterbox = Letterbox.fit((rgb.shape[1], rgb.shape[0]), input_size)
+        frames.append(letterbox.apply(np.asarray(rgb, dtype=np.uint8), PAD_VALUE))
+    return np.stack(frames)
+
+
+def export_onnx(checkpoint: Checkpoint, output: str | Path, input_size: int | None = None,
+                opset: int = DEFAULT_OPSET, int8: bool = False,
+                calibration_frames: NDArray[np.uint8] | None = None,
+                parity_frames: NDArray[np.uint8] | None = None) -> ExportReport:
+    """Export, write metadata, check the graph and its parity with torch; return what was verified.
+
+    With `int8`, the verified float graph is quantised and written to `output` instead; the float
+    parity report still describes the graph before quantisation.
+    """
+    model = contract_model(checkpoint, input_size)
+    size = model.input_size
+    target = Path(output)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as folder:
+        float_path = Path(folder) / "float.onnx" if int8 else target
+        _torch_to_onnx(model, float_path, opset)
+        _write_metadata(float_path, _metadata(checkpoint, size))
+        frames = parity_frames if parity_frames is not None else synthetic_parity_frames(size)
+        parity = check_parity(model, OnnxDetector(float_path), frames, checkpoint.info.default_min_score)
+        integer_ops = None
+        if int8:
+            if calibration_frames is None:
+                raise ValueError("INT8 export needs calibration frames (--calibration-data DIR)")
+            quantize_int8(float_path, target, calibration_frames)
+            onnx.checker.check_model(onnx.load(str(target)), full_check=True)
+            integer_ops = check_integer_convolutions(target)
+    return ExportReport(str(target), size, opset, model.max_detections, parity, int8, integer_ops)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--checkpoint", required=True, help="training checkpoint (.pt) to export")
+    parser.add_argument("--output", required=True, help="ONNX file to write")
+    parser.add_argument("--input-size", type=int, default=None,
+                        help="input side S in pixels (multiple of 32; default: the trained size)")
+    parser.add_argument("--opset", type=int, default=DEFAULT_OPSET, help="ONNX opset (default 18)")
+    parser.add_argument("--int8", action="store_true", help="static INT8 QDQ quantisation")
+    parser.add_argument("--calibration-data", default=None,
+                        help="folder of frames (e.g. a `fishloc synth` output) for INT8 calibration")
+    parser.add_argument("--model-version", default=None, help="override fishloc.model_version")
+    parser.add_argument("--trained-on", default=None, help="override fishloc.trained_on")
+    parser.add_argument("--min-score", type=float, default=None,
+                        help="override fishloc.default_min_score")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.int8 and not args.calibration_data:
+        print("fishloc export: --int8 needs --calibration-data DIR", file=sys.stderr)
+        return 2
+    try:
+        checkpoint = load_checkpoint(args.checkpoint)
+    except CheckpointError as error:
+        print(f"fishloc export: {error}", file=sys.stderr)
+        return 2
+    info = checkpoint.info
+    if args.model_version is not None:
+        info.model_version = args.model_version
+    if args.trained_on is not None:
+        info.trained_on = args.trained_on
+    if args.min_score is not None:
+        info.default_min_score = args.min_score
+    try:
+        size = args.input_size or checkpoint.config.input_size
+        calibration = load_calibration_frames(args.calibration_data, size) if args.int8 else None
+        checkpoint.build(args.checkpoint)  # a mismatched checkpoint fails here, with its own message
+        report = export_onnx(checkpoint, args.output, args.input_size, args.opset, args.int8, calibration)
+    except (CheckpointError, ValueError) as error:
+        print(f"fishloc export: {error}", file=sys.stderr)
+        return 2
+    print(json.dumps(asdict(report), indent=2))
+    return 0

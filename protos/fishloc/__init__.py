@@ -1,0 +1,1 @@
+"""Package fishloc of the gRPC API."""

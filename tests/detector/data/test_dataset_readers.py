@@ -1,0 +1,88 @@
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from detector.data.readers import DatasetFormatError, read_dataset, write_dataset
+from fisheye import radius_aligned_to_cepdof
+
+
+def test_fishloc_format_round_trip(toy_dataset: Callable[..., Path], tmp_path: Path) -> None:
+    source = toy_dataset(count=3)
+    frames = read_dataset(source)
+    assert len(frames) == 3 and all(len(f) == 3 for f in frames)
+    first = frames[0]
+    assert first.camera is not None and first.camera.id == "toy"
+    assert first.path.exists() and first.split == "seen"
+    np.testing.assert_allclose(first.distances_m, np.hypot(*first.locations_m.T))
+    copy = source.parent / "copy.json"
+    write_dataset(frames, copy)
+    again = read_dataset(copy)
+    for a, b in zip(frames, again, strict=True):
+        np.testing.assert_allclose(a.boxes_cxcywh, b.boxes_cxcywh)
+        np.testing.assert_allclose(a.locations_m, b.locations_m)
+        assert (a.path, a.image_id, a.scene_id, a.camera) == (b.path, b.image_id, b.scene_id, b.camera)
+    assert read_dataset(source.parent)[0].path == first.path  # a folder reads its annotations.json
+
+
+def test_cepdof_boxes_become_radius_aligned_about_the_frame_centre(tmp_path: Path) -> None:
+    centre = (1023.5, 1023.5)
+    radius_aligned = np.array([[1400.0, 1300.0, 150.0, 400.0], [600.0, 500.0, 120.0, 300.0]])
+    cepdof = radius_aligned_to_cepdof(radius_aligned, centre)
+    document = {
+        "images": [{"id": "Lunch_1", "file_name": "Lunch_1.jpg", "width": 2048, "height": 2048}],
+        "annotations": [{"id": i, "image_id": "Lunch_1", "category_id": 1, "bbox": box.tolist()}
+                        for i, box in enumerate(cepdof)],
+        "categories": [{"id": 1, "name": "person"}],
+    }
+    path = tmp_path / "cepdof.json"
+    path.write_text(json.dumps(document))
+    (frame,) = read_dataset(path)
+    assert frame.camera is None and frame.principal_point == centre
+    np.testing.assert_allclose(frame.boxes_cxcywh, radius_aligned, atol=1e-9)
+    assert np.all(np.isnan(frame.locations_m)) and np.all(np.isnan(frame.distances_m))
+
+
+@pytest.mark.parametrize(("content", "message"), [
+    ("{not json", "not valid JSON"),
+    ('{"annotations": []}', "no 'images' list"),
+    ('{"images": [{"id": 1, "file_name": "a.jpg", "width": 8, "height": 8}],'
+     ' "annotations": [{"image_id": 1, "bbox": [1, 2, 3, 4]}]}', "neither rotated_box"),
+    ('{"images": [{"id": 1, "file_name": "a.jpg", "width": 8, "height": 8, "camera": {}}],'
+     ' "annotations": [{"image_id": 1, "rotated_box": [1, 2, 3, 4]}]}', "invalid camera"),
+])
+def test_bad_files_give_clear_errors(tmp_path: Path, content: str, message: str) -> None:
+    path = tmp_path / "bad.json"
+    path.write_text(content)
+    with pytest.raises(DatasetFormatError, match=message):
+        read_dataset(path)
+
+
+def test_frame_without_people(tmp_path: Path) -> None:
+    path = tmp_path / "empty.json"
+    path.write_text(json.dumps({"images": [{"id": 1, "file_name": "a.jpg", "width": 8, "height": 8}],
+                                "annotations": []}))
+    (frame,) = read_dataset(path)
+    assert frame.boxes_cxcywh.shape == (0, 4) and frame.locations_m.shape == (0, 2)
+
+
+def test_crowd_boxes_are_kept_apart_and_written_back(tmp_path: Path) -> None:
+    document = {
+        "images": [{"id": 1, "file_name": "a.jpg", "width": 100, "height": 100}],
+        "annotations": [
+            {"id": 1, "image_id": 1, "category_id": 1, "rotated_box": [20, 30, 5, 9], "iscrowd": 0},
+            {"id": 2, "image_id": 1, "category_id": 1, "rotated_box": [70, 60, 4, 6], "iscrowd": 1},
+        ],
+    }
+    path = tmp_path / "crowd.json"
+    path.write_text(json.dumps(document))
+    (frame,) = read_dataset(path)
+    np.testing.assert_allclose(frame.boxes_cxcywh, [[20, 30, 5, 9]])
+    np.testing.assert_allclose(frame.crowd_cxcywh, [[70, 60, 4, 6]])
+    write_dataset([frame], tmp_path / "again.json")
+    (again,) = read_dataset(tmp_path / "again.json")
+    np.testing.assert_allclose(again.crowd_cxcywh, frame.crowd_cxcywh)

@@ -1,0 +1,143 @@
+"""The reference gateway end to end: a folder and a short video file streamed to a real server,
+and reconnecting to a server that comes up late."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pytest
+from service_frames import encode, person_frame
+from service_live_server import LiveServer
+
+from fisheye import FisheyeCamera
+from service.config import Settings
+from service.frame_sources import FolderSource, open_source
+from service.gateway import Gateway, GatewayConfig
+
+SPOTS = [(1.0, 0.5), (-1.5, 2.0), (0.3, -2.2), (2.5, 1.0), (-0.8, -0.9)]
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory: pytest.TempPathFactory, double_model_path: object) -> Iterator[LiveServer]:
+    folder = tmp_path_factory.mktemp("gateway")
+    settings = Settings(model=double_model_path, database=str(folder / "cameras.db"), http_port=0,
+                        grpc_port=0, host="127.0.0.1", threads=1)
+    with LiveServer(settings) as live:
+        yield live
+
+
+def grpc_target(server: LiveServer) -> str:
+    assert server.service is not None
+    return f"127.0.0.1:{server.service.grpc_port}"
+
+
+def gateway_cli(server: LiveServer, source: Path, *extra: str) -> tuple[list[dict[str, Any]], dict[str, int]]:
+    done = subprocess.run(
+        [sys.executable, "-m", "service.cli", "gateway", "--server", grpc_target(server), "--camera", "demo",
+         "--source", str(source), *extra],
+        capture_output=True, text=True, timeout=120, check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    lines = [json.loads(line) for line in done.stdout.splitlines()]
+    counts = json.loads(done.stderr.strip().splitlines()[-1])
+    return lines, counts
+
+
+def check_positions(lines: list[dict[str, Any]], truth: dict[str, tuple[float, float]]) -> int:
+    checked = 0
+    for line in lines:
+        if line["status"] == "OK" and line["frame_id"] in truth:
+            position = line["detections"][0]["position_m"]
+            np.testing.assert_allclose(position, truth[line["frame_id"]], atol=0.01)
+            checked += 1
+    return checked
+
+
+def test_gateway_streams_a_folder(server: LiveServer, demo_camera: FisheyeCamera, tmp_path: Path) -> None:
+    truth: dict[str, tuple[float, float]] = {}
+    for index, spot in enumerate(SPOTS):
+        name = f"{index:03d}.{'png' if index == 2 else 'jpg'}"
+        frame = person_frame(demo_camera, spot, (1024, 1024), disk_radius_px=20)
+        (tmp_path / name).write_bytes(encode(frame.bgr, ".png" if index == 2 else ".jpg"))
+        truth[name] = spot
+    (tmp_path / "005.jpg").write_bytes(b"\xff\xd8\xff\xe0 not really a jpeg")
+    (tmp_path / "notes.txt").write_text("not an image")
+    lines, counts = gateway_cli(server, tmp_path, "--fps", "50")
+    assert counts["sent"] == 6 == counts["answered"] + counts["dropped"] and counts["lost"] == 0
+    assert [line["frame_id"] for line in lines] == [f"{i:03d}.{'png' if i == 2 else 'jpg'}" for i in range(6)]
+    assert all(line["camera_id"] == "demo" for line in lines)
+    bad = lines[-1]
+    assert bad["status"] in ("ERROR", "DROPPED") and counts["errors"] == (bad["status"] == "ERROR")
+    assert check_positions(lines, truth) == counts["answered"] - counts["errors"] >= 1
+
+
+def test_gateway_streams_a_video_file(server: LiveServer, demo_camera: FisheyeCamera, tmp_path: Path) -> None:
+    video = tmp_path / "clip.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 25.0, (512, 512))
+    assert writer.isOpened()
+    truth: dict[str, tuple[float, float]] = {}
+    for index in range(8):
+        spot = SPOTS[index % len(SPOTS)]
+        writer.write(person_frame(demo_camera, spot, (512, 512), disk_radius_px=12).bgr)
+        truth[str(index)] = spot
+    writer.release()
+    lines, counts = gateway_cli(server, video, "--fps", "0")
+    assert counts["sent"] == 8 == counts["answered"] + counts["dropped"] == len(lines)
+    assert [line["frame_id"] for line in lines] == [str(i) for i in range(8)]
+    assert counts["errors"] == 0 and check_positions(lines, truth) == counts["answered"] >= 1
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def test_gateway_reconnects_to_a_server_that_starts_late(settings_for: Callable[..., Settings],
+                                                         demo_camera: FisheyeCamera, tmp_path: Path) -> None:
+    for index, spot in enumerate(SPOTS[:3]):
+        frame = person_frame(demo_camera, spot, (512, 512), disk_radius_px=12)
+        (tmp_path / f"{index}.jpg").write_bytes(encode(frame.bgr))
+    port = _free_port()
+    lines: list[str] = []
+    config = GatewayConfig(server=f"127.0.0.1:{port}", camera_id="demo", fps=0, max_backoff_s=0.5,
+                           max_reconnects=200)
+    gateway = Gateway(config, FolderSource(tmp_path), lines.append)
+    outcome: dict[str, Any] = {}
+
+    def run_gateway() -> None:
+        try:
+            outcome["counts"] = asyncio.run(gateway.run())
+        except BaseException as error:
+            outcome["error"] = error
+
+    thread = threading.Thread(target=run_gateway)
+    thread.start()
+    deadline = time.monotonic() + 30
+    while gateway.counts.reconnects < 1 and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert gateway.counts.reconnects >= 1  # nothing listens yet
+    with LiveServer(settings_for(grpc_port=port)):
+        thread.join(60)
+    assert "error" not in outcome, outcome.get("error")
+    counts = outcome["counts"]
+    assert counts.sent == counts.answered + counts.dropped + counts.lost
+    assert counts.answered >= 1 and len(lines) == counts.answered + counts.dropped
+
+
+def test_open_source_kinds(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="neither"):
+        open_source(str(tmp_path / "missing.mp4"))
+    with pytest.raises(ValueError, match="no images"):
+        open_source(str(tmp_path))
