@@ -26,6 +26,8 @@ _CAMERA_ID_RE = re.compile(CAMERA_ID_PATTERN)
 DEFAULT_MAX_THETA_DEG = 90.0
 # Frames whose aspect ratio differs from the calibration's by more than one pixel are refused.
 _ASPECT_TOLERANCE_PX = 1.0
+# Real lenses have |k| well under 10; far larger values only overflow the lens arithmetic.
+_MAX_KB_ABS = 1000.0
 
 
 @dataclass(frozen=True)
@@ -95,6 +97,8 @@ class FisheyeCamera(BaseModel):
             )
         if self.kb[0] <= 0:
             raise ValueError(f"kb[0] (k1) must be positive, got {self.kb[0]}")
+        if max(abs(k) for k in self.kb) > _MAX_KB_ABS:
+            raise ValueError(f"kb coefficients must lie within ±{_MAX_KB_ABS:g}, got {self.kb}")
         bad_theta = monotonic_violation(self.kb, self.theta_max_rad)
         if bad_theta is not None:
             raise ValueError(

@@ -57,7 +57,11 @@ def monotonic_violation(kb: ArrayLike, theta_max_rad: float) -> float | None:
     for i, k in enumerate(coeffs):
         derivative_poly[2 * i] = (2 * i + 1) * k
     if len(derivative_poly) > 1:
-        roots = np.roots(derivative_poly[::-1])
+        # A negligible leading coefficient (e.g. 1e-300) overflows the companion matrix; the
+        # roots it loses lie far outside [0, θmax] and the dense grid still guards the rest.
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+            roots = np.roots(derivative_poly[::-1])
+        roots = roots[np.isfinite(roots)]
         real = roots[np.abs(roots.imag) < 1e-9].real
         candidates.append(real[(real > 0) & (real <= theta_max_rad)])
     thetas = np.sort(np.concatenate(candidates))

@@ -8,6 +8,7 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
+from fastapi.middleware.cors import CORSMiddleware
 
 from service.dependencies import ServiceState
 from service.errors import install_error_handlers
@@ -41,5 +42,12 @@ def create_app(state: ServiceState, warm_up: bool = True) -> FastAPI:
     install_error_handlers(app)
     for module in (health, model, cameras, detect, latest, metrics, viewer):
         app.include_router(module.router)
+    if state.settings.cors_origins:  # CORS stays off (no CORS headers at all) unless configured
+        app.add_middleware(
+            CORSMiddleware, allow_origins=state.settings.cors_origins,
+            allow_methods=["GET", "POST", "PUT", "DELETE"],
+            allow_headers=["Authorization", "Content-Type", "X-Request-ID"],
+            expose_headers=["X-Request-ID", "Retry-After", "X-Detections"],
+        )
     app.add_middleware(RequestContextMiddleware, metrics=state.metrics)
     return app

@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Annotated
 
-from pydantic import AliasChoices, Field, SecretStr, field_validator
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic import AliasChoices, Field, SecretStr, field_validator, model_validator
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
 from service.cpu import cpu_budget
@@ -25,8 +26,9 @@ def default_database_path() -> Path:
 class Settings(BaseSettings):
     """Everything `fishloc serve` can be told (flag, or environment variable FISHLOC_<NAME>)."""
 
+    # hide_input_in_errors: a settings error must not print the tokens it was given.
     model_config = SettingsConfigDict(env_prefix="FISHLOC_", extra="ignore", frozen=True,
-                                      populate_by_name=True)
+                                      populate_by_name=True, hide_input_in_errors=True)
 
     host: str = Field("127.0.0.1", description="address to listen on (0.0.0.0 in containers)")
     http_port: int = Field(8000, ge=0, le=65535, description="REST port (0: any free port)")
@@ -40,6 +42,18 @@ class Settings(BaseSettings):
     demo_camera: bool = Field(True, description="add the `demo` camera the first time a database is used")
     demo_camera_path: Path = DEMO_CAMERA_PATH
     api_token: SecretStr | None = Field(None, description="bearer token required for registry writes")
+    detect_token: SecretStr | None = Field(
+        None, description="bearer token required for detection (the API token also passes); none: open"
+    )
+    tls_cert: Path | None = Field(None, description="PEM certificate (chain): serve REST and gRPC over TLS")
+    tls_key: Path | None = Field(None, description="PEM private key of tls_cert")
+    cors_origins: Annotated[list[str], NoDecode] = Field(
+        default_factory=list, description="origins allowed to call from a browser (comma-separated; "
+                                          "none: CORS off)",
+    )
+    head_timeout_s: float = Field(10.0, gt=0, description="time for a request's line and headers")
+    body_timeout_s: float = Field(30.0, gt=0, description="time for a request's body to arrive")
+    keep_alive_timeout_s: int = Field(5, ge=1, description="idle time before a keep-alive connection closes")
     max_body_bytes: int = Field(32 * 1024 * 1024, ge=1024, description="largest encoded frame accepted")
     max_pixels: int = Field(40_000_000, ge=1, description="largest decoded frame (width × height)")
     threads: int = Field(default_factory=cpu_budget, ge=1,
@@ -52,7 +66,20 @@ class Settings(BaseSettings):
     log_level: str = Field("info", description="debug, info, warning, error")
     log_json: bool = Field(True, description="JSON log lines (false: plain text)")
 
-    @field_validator("api_token")
+    @field_validator("cors_origins", mode="before")
+    @classmethod
+    def _split_origins(cls, value: object) -> object:
+        if isinstance(value, str):
+            return [origin.strip() for origin in value.split(",") if origin.strip()]
+        return value
+
+    @model_validator(mode="after")
+    def _tls_needs_both(self) -> Settings:
+        if (self.tls_cert is None) != (self.tls_key is None):
+            raise ValueError("tls_cert and tls_key go together: set both (FISHLOC_TLS_CERT, FISHLOC_TLS_KEY)")
+        return self
+
+    @field_validator("api_token", "detect_token")
     @classmethod
     def _empty_token_is_none(cls, value: SecretStr | None) -> SecretStr | None:
         return None if value is None or not value.get_secret_value() else value

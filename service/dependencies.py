@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import Annotated
 
 from fastapi import Depends, Request
+from pydantic import SecretStr
 
 from service.cameras import CameraRegistry
 from service.config import Settings
@@ -33,17 +34,41 @@ def get_state(request: Request) -> ServiceState:
 State = Annotated[ServiceState, Depends(get_state)]
 
 
+def bearer_matches(authorization: str, tokens: list[SecretStr]) -> bool:
+    """Whether an Authorization header value is `Bearer <one of tokens>`, compared in constant time.
+
+    Every token is compared (no early exit), with hmac.compare_digest, so the answer takes as long
+    for a wrong token as for a right one and says nothing about which token nearly matched.
+    """
+    scheme, _, given = authorization.partition(" ")
+    given_bytes = given.strip().encode("utf-8")
+    matched = False
+    for token in tokens:
+        matched |= hmac.compare_digest(given_bytes, token.get_secret_value().encode("utf-8"))
+    return scheme.lower() == "bearer" and matched
+
+
 def require_write_token(request: Request, state: State) -> None:
     """Registry writes need `Authorization: Bearer <FISHLOC_API_TOKEN>` when a token is configured."""
     token = state.settings.api_token
     if token is None:
         return
-    scheme, _, given = request.headers.get("authorization", "").partition(" ")
-    expected = token.get_secret_value().encode("utf-8")
-    # compare_digest takes as long for a wrong token as for a right one.
-    if scheme.lower() != "bearer" or not hmac.compare_digest(given.strip().encode("utf-8"), expected):
+    if not bearer_matches(request.headers.get("authorization", ""), [token]):
         raise ApiError(401, "unauthorized", "registry writes need 'Authorization: Bearer <token>'",
                        headers={"WWW-Authenticate": "Bearer"})
 
 
+def require_detect_token(request: Request, state: State) -> None:
+    """Detection needs `Authorization: Bearer <FISHLOC_DETECT_TOKEN>` (or the API token) when a
+    detect token is configured."""
+    settings = state.settings
+    if settings.detect_token is None:
+        return
+    tokens = [settings.detect_token] + ([settings.api_token] if settings.api_token is not None else [])
+    if not bearer_matches(request.headers.get("authorization", ""), tokens):
+        raise ApiError(401, "unauthorized", "detection needs 'Authorization: Bearer <token>'",
+                       headers={"WWW-Authenticate": "Bearer"})
+
+
 WriteAccess = Depends(require_write_token)
+DetectAccess = Depends(require_detect_token)

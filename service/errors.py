@@ -20,11 +20,13 @@ FRAME_ERROR_STATUS = {
     "unsupported_image": 415,
     "image_too_large": 413,
     "frame_size_mismatch": 422,
+    "frame_too_small": 422,
 }
 
 _STATUS_CODES = {
     400: "bad_request", 401: "unauthorized", 404: "not_found", 405: "method_not_allowed",
-    413: "payload_too_large", 415: "unsupported_media_type", 422: "invalid_request", 503: "unavailable",
+    408: "request_timeout", 413: "payload_too_large", 415: "unsupported_media_type",
+    422: "invalid_request", 503: "unavailable",
 }
 
 

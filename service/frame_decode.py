@@ -115,6 +115,22 @@ def read_header(data: bytes) -> FrameHeader:
     return FrameHeader(image_format, width, height)
 
 
+def check_frame_size(header: FrameHeader, max_pixels: int, min_side_px: int = 1) -> None:
+    """Refuse, from the header alone, a frame of more than `max_pixels` pixels (`image_too_large`:
+    nothing is allocated for it) or with a side under `min_side_px` (`frame_too_small`)."""
+    if header.width * header.height > max_pixels:
+        raise FrameError(
+            "image_too_large",
+            f"the image is {header.width}x{header.height} = {header.width * header.height} pixels; "
+            f"the limit is {max_pixels}",
+        )
+    if min(header.size_wh) < min_side_px:
+        raise FrameError(
+            "frame_too_small",
+            f"the image is {header.width}x{header.height}; frames need at least {min_side_px} px a side",
+        )
+
+
 def pick_reduction(frame_wh: tuple[int, int], input_size: int) -> int:
     """Largest DCT reduction (1, 2, 4 or 8) that keeps the frame's long side ≥ `input_size` and
     divides both sides exactly (so reduced pixels map back to frame pixels without rounding)."""
@@ -134,12 +150,7 @@ def decode_frame(data: bytes, input_size: int, max_pixels: int,
     when the caller has read it already.
     """
     header = read_header(data) if header is None else header
-    if header.width * header.height > max_pixels:
-        raise FrameError(
-            "image_too_large",
-            f"the image is {header.width}x{header.height} = {header.width * header.height} pixels; "
-            f"the limit is {max_pixels}",
-        )
+    check_frame_size(header, max_pixels)
     reduction = pick_reduction(header.size_wh, input_size) if header.format == "jpeg" else 1
     flags = _BASE_FLAGS | (_REDUCED_FLAGS[reduction] if reduction > 1 else cv2.IMREAD_COLOR)
     buffer = np.frombuffer(data, dtype=np.uint8)

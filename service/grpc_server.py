@@ -7,7 +7,6 @@ streamed frames are answered per frame (see protos/fishloc/v1/localizer.proto an
 from __future__ import annotations
 
 import asyncio
-import hmac
 import logging
 from collections.abc import AsyncIterator
 from typing import Any, NoReturn
@@ -19,7 +18,7 @@ from grpc_reflection.v1alpha import reflection
 from fisheye import CalibrationError, FisheyeCamera
 from protos.fishloc.v1 import localizer_pb2 as pb
 from protos.fishloc.v1 import localizer_pb2_grpc as pb_grpc
-from service.dependencies import ServiceState
+from service.dependencies import ServiceState, bearer_matches
 from service.frame_decode import FrameError
 from service.grpc_convert import (
     camera_to_message,
@@ -31,6 +30,7 @@ from service.grpc_convert import (
 from service.grpc_stream import FrameStream
 from service.result import DetectionResult
 from service.runner import OverloadedError
+from service.tls import TlsFiles
 
 log = logging.getLogger(__name__)
 
@@ -42,6 +42,14 @@ _ADMIT_POLL_S = 0.005
 async def _abort(context: grpc.aio.ServicerContext, code: grpc.StatusCode, message: str) -> NoReturn:
     await context.abort(code, message)
     raise AssertionError("context.abort returned")  # it raises; this tells the type checker
+
+
+def _authorization(context: grpc.aio.ServicerContext) -> str:
+    """The `authorization` metadata of a call ('' when absent)."""
+    for key, value in context.invocation_metadata() or ():
+        if key == "authorization":
+            return str(value)
+    return ""
 
 
 class _FrameRefusedError(Exception):
@@ -88,7 +96,17 @@ class LocalizerServicer:
                                      f"min_score must be within [0, 1], got {request.min_score}")
         return request.min_score
 
+    async def _require_detect_token(self, context: grpc.aio.ServicerContext) -> None:
+        settings = self.state.settings
+        if settings.detect_token is None:
+            return
+        tokens = [settings.detect_token] + ([settings.api_token] if settings.api_token is not None else [])
+        if not bearer_matches(_authorization(context), tokens):
+            await _abort(context, grpc.StatusCode.UNAUTHENTICATED,
+                         "detection needs 'authorization: Bearer <token>'")
+
     async def Detect(self, request: pb.DetectRequest, context: grpc.aio.ServicerContext) -> pb.DetectResponse:  # noqa: N802
+        await self._require_detect_token(context)
         runner = self.state.runner
         if not runner.ready:
             await _abort(context, grpc.StatusCode.UNAVAILABLE, "not_ready: the model is warming up")
@@ -132,6 +150,7 @@ class LocalizerServicer:
 
     async def StreamDetect(self, request_iterator: AsyncIterator[pb.DetectRequest],  # noqa: N802
                            context: grpc.aio.ServicerContext) -> AsyncIterator[pb.DetectResponse]:
+        await self._require_detect_token(context)
         dropped = self.state.metrics.dropped
 
         def count_drop(camera_id: str) -> None:
@@ -149,10 +168,7 @@ class LocalizerServicer:
         token = self.state.settings.api_token
         if token is None:
             return
-        metadata = {key: value for key, value in (context.invocation_metadata() or ())}
-        scheme, _, given = str(metadata.get("authorization", "")).partition(" ")
-        expected = token.get_secret_value().encode("utf-8")
-        if scheme.lower() != "bearer" or not hmac.compare_digest(given.strip().encode("utf-8"), expected):
+        if not bearer_matches(_authorization(context), [token]):
             await _abort(context, grpc.StatusCode.UNAUTHENTICATED,
                          "registry writes need 'authorization: Bearer <token>'")
 
@@ -191,7 +207,7 @@ class LocalizerServicer:
 class GrpcFrontEnd:
     """The grpc.aio server: Localizer, health (following readiness) and reflection."""
 
-    def __init__(self, state: ServiceState) -> None:
+    def __init__(self, state: ServiceState, tls: TlsFiles | None = None) -> None:
         self.state = state
         self.stopping = asyncio.Event()
         settings = state.settings
@@ -203,7 +219,12 @@ class GrpcFrontEnd:
             (SERVICE_NAME, health_pb2.DESCRIPTOR.services_by_name["Health"].full_name,
              reflection.SERVICE_NAME), self.server,
         )
-        self.port = self.server.add_insecure_port(f"{settings.host}:{settings.grpc_port}")
+        address = f"{settings.host}:{settings.grpc_port}"
+        if tls is None:
+            self.port = self.server.add_insecure_port(address)
+        else:
+            credentials = grpc.ssl_server_credentials([(tls.key_pem, tls.cert_pem)])
+            self.port = self.server.add_secure_port(address, credentials)
         if self.port == 0:
             raise RuntimeError(f"cannot listen for gRPC on {settings.host}:{settings.grpc_port}")
         self._readiness: asyncio.Task[None] | None = None

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fisheye import FisheyeCamera, Letterbox, cxcywh_to_corners, foot_points, radial_angles_rad, rotated_nms
-from service.frame_decode import DecodedFrame, FrameError, decode_frame, read_header
+from service.frame_decode import DecodedFrame, FrameError, check_frame_size, decode_frame, read_header
 from service.onnx_model import ModelInfo, OnnxModel
 from service.result import DetectionResult, Detections
 
@@ -30,6 +30,7 @@ class PipelineConfig:
     nms_iou: float = 0.6
     max_detections: int = 300
     max_pixels: int = 40_000_000
+    min_frame_side_px: int = 16  # smaller frames cannot show a person; refused, not guessed at
 
     def __post_init__(self) -> None:
         if not 0.0 < self.nms_iou <= 1.0:
@@ -87,6 +88,7 @@ class Pipeline:
             raise ValueError(f"min_score must be within [0, 1], got {threshold}")
         start = time.perf_counter()
         header = read_header(data)
+        check_frame_size(header, self.config.max_pixels, self.config.min_frame_side_px)
         try:
             frame_camera = camera.scaled_to(header.size_wh)
         except ValueError as error:

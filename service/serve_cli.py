@@ -15,6 +15,7 @@ from models import DEFAULT_MODEL_PATH
 from service.config import Settings
 from service.logs import configure_logging
 from service.onnx_model import ModelError
+from service.tls import TlsError
 
 log = logging.getLogger("fishloc.serve")
 
@@ -66,6 +67,9 @@ def run(args: argparse.Namespace) -> int:
         return 2
     except CalibrationError as error:
         print(f"fishloc serve: bad camera file: {error}", file=sys.stderr)
+        return 2
+    except TlsError as error:
+        print(f"fishloc serve: {error}", file=sys.stderr)
         return 2
     except (RuntimeError, OSError) as error:  # e.g. a port already in use
         print(f"fishloc serve: {error}", file=sys.stderr)

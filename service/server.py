@@ -22,8 +22,10 @@ from service.cameras import CameraRegistry
 from service.config import Settings
 from service.dependencies import ServiceState
 from service.grpc_server import GrpcFrontEnd
+from service.http_protocol import head_deadline_protocol
 from service.metrics import ServiceMetrics
 from service.runner import build_runner
+from service.tls import TlsFiles, tls_from_settings
 
 log = logging.getLogger(__name__)
 
@@ -64,6 +66,7 @@ class Service:
         self.warm_up = warm_up
         self._http: uvicorn.Server | None = None
         self._http_task: asyncio.Task[None] | None = None
+        self.tls: TlsFiles | None = None
         self.grpc: GrpcFrontEnd | None = None
 
     @property
@@ -81,12 +84,17 @@ class Service:
 
     async def start(self) -> None:
         settings = self.state.settings
+        self.tls = tls_from_settings(settings)  # TlsError before anything listens
         if settings.grpc_port >= 0:
-            self.grpc = GrpcFrontEnd(self.state)
+            self.grpc = GrpcFrontEnd(self.state, tls=self.tls)
             await self.grpc.start()
         config = uvicorn.Config(
             create_app(self.state, warm_up=self.warm_up), host=settings.host, port=settings.http_port,
             log_config=None, access_log=False, lifespan="on", timeout_graceful_shutdown=30,
+            http=head_deadline_protocol(settings.head_timeout_s),
+            timeout_keep_alive=settings.keep_alive_timeout_s,
+            ssl_certfile=self.tls.cert_path if self.tls else None,
+            ssl_keyfile=self.tls.key_path if self.tls else None,
         )
         try:
             # Bound here so that a taken port is a clear OSError, not uvicorn's sys.exit.
@@ -106,7 +114,8 @@ class Service:
                 # uvicorn logs the cause (e.g. the port is taken) and exits its task.
                 raise RuntimeError(f"the HTTP server did not start on {settings.host}:{settings.http_port}")
             await asyncio.sleep(0.01)
-        log.info("REST listening on http://%s:%d", settings.host, self.http_port)
+        scheme = "https" if self.tls else "http"
+        log.info("REST listening on %s://%s:%d", scheme, settings.host, self.http_port)
 
     async def wait(self) -> None:
         """Until the HTTP server exits (SIGINT/SIGTERM in the main thread, or `stop`)."""

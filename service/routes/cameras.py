@@ -12,12 +12,22 @@ from fisheye import CalibrationError, FisheyeCamera, camera_to_dict
 from fisheye.camera import CAMERA_ID_PATTERN
 from service.dependencies import State, WriteAccess
 from service.errors import ApiError
+from service.request_body import BodyLimits, read_body
 from service.schemas import CameraList, error_responses
 
 router = APIRouter(tags=["cameras"])
 
 CameraId = Path(pattern=CAMERA_ID_PATTERN, description="camera id")
 _MAX_RECORD_BYTES = 64 * 1024
+
+
+def _record_schema() -> dict[str, Any]:
+    """The JSON schema of a PUT body: the camera record with `id` optional (the path gives it)."""
+    schema = FisheyeCamera.model_json_schema(ref_template="#/components/schemas/{model}")
+    schema.pop("$defs", None)  # SitePose is in the components already, by FisheyeCamera
+    schema["required"] = [name for name in schema.get("required", []) if name != "id"]
+    schema["title"] = "CameraRecord"
+    return schema
 
 
 def not_found(camera_id: str) -> ApiError:
@@ -48,17 +58,17 @@ async def get_camera(state: State, camera_id: str = CameraId) -> dict[str, Any]:
     description="Body: the camera-file record of DESIGN.md as JSON; `id` may be left out and must "
                 "match the path when given. Answers 201 when the camera is new, 200 when replaced.",
     openapi_extra={"requestBody": {"required": True, "content": {
-        "application/json": {"schema": {"$ref": "#/components/schemas/FisheyeCamera"}}}}},
+        "application/json": {"schema": _record_schema()}}}},
 )
 async def put_camera(request: Request, response: Response, state: State,
                      camera_id: str = CameraId) -> dict[str, Any]:
-    body = await request.body()
-    if len(body) > _MAX_RECORD_BYTES:
-        raise ApiError(413, "payload_too_large", f"a camera record is at most {_MAX_RECORD_BYTES} bytes")
+    body = await read_body(request, BodyLimits(_MAX_RECORD_BYTES, state.settings.body_timeout_s))
     try:
         record = json.loads(body)
-    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+    except ValueError as error:  # JSONDecodeError, UnicodeDecodeError, an int of too many digits
         raise ApiError(400, "bad_json", f"the body is not JSON: {error}") from None
+    except RecursionError:
+        raise ApiError(400, "bad_json", "the body is not a camera record: JSON nested too deeply") from None
     if not isinstance(record, dict):
         raise ApiError(422, "invalid_camera", "the body must be a JSON object (a camera record)")
     try:

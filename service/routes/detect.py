@@ -12,10 +12,11 @@ from starlette.datastructures import UploadFile
 from starlette.formparsers import MultiPartException, MultiPartParser
 
 from fisheye.camera import CAMERA_ID_PATTERN
-from service.dependencies import ServiceState, State
+from service.dependencies import DetectAccess, ServiceState, State
 from service.errors import ApiError, frame_error
 from service.frame_decode import FrameError
 from service.render import render_jpeg
+from service.request_body import BodyLimits, read_body
 from service.result import result_to_json
 from service.routes.cameras import not_found
 from service.runner import OverloadedError
@@ -31,21 +32,6 @@ _REQUEST_BODY = {"required": True, "content": {
     "multipart/form-data": {"schema": {"type": "object", "required": ["image"],
                                        "properties": {"image": {"type": "string", "format": "binary"}}}},
 }}
-
-
-async def read_body(request: Request, limit: int) -> bytes:
-    """The request body, refused with 413 as soon as it passes `limit` bytes."""
-    declared = request.headers.get("content-length")
-    if declared is not None and declared.isdigit() and int(declared) > limit:
-        raise ApiError(413, "payload_too_large", f"the body is {declared} bytes; the limit is {limit}")
-    chunks: list[bytes] = []
-    size = 0
-    async for chunk in request.stream():
-        size += len(chunk)
-        if size > limit:
-            raise ApiError(413, "payload_too_large", f"the body passes the limit of {limit} bytes")
-        chunks.append(chunk)
-    return b"".join(chunks)
 
 
 async def _image_from_multipart(request: Request, body: bytes) -> bytes:
@@ -77,7 +63,7 @@ async def frame_bytes(request: Request, state: ServiceState) -> bytes:
             f"Content-Type {media_type or '(none)'} is not accepted; send image/jpeg, image/png or "
             "multipart/form-data with a field 'image'",
         )
-    body = await read_body(request, state.settings.max_body_bytes)
+    body = await read_body(request, BodyLimits(state.settings.max_body_bytes, state.settings.body_timeout_s))
     if media_type == "multipart/form-data":
         body = await _image_from_multipart(request, body)
     if not body:
@@ -92,8 +78,9 @@ async def frame_bytes(request: Request, state: ServiceState) -> bytes:
         200: {"model": DetectResponse, "description": "detections (JSON), or the frame with them drawn "
                                                       "(image/jpeg) with render=jpeg",
               "content": {"image/jpeg": _BINARY}},
-        **error_responses(400, 404, 413, 415, 422, 503),
+        **error_responses(400, 401, 404, 408, 413, 415, 422, 503),
     },
+    dependencies=[DetectAccess],
     summary="Find people in one frame and place them on the floor",
     description="Body: the encoded frame (image/jpeg, image/png) or a multipart form with the field "
                 "`image`. Positions are in metres in the camera's floor frame (origin at the nadir, "

@@ -1,0 +1,48 @@
+"""`fishloc serve` on a read-only root filesystem, as the container runs it (`docker run --read-only`,
+Kubernetes `readOnlyRootFilesystem: true`): only the registry's folder is writable (a tmpfs here,
+the volume /var/lib/fishloc in the image). It must start, become ready, write cameras and detect."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+import httpx
+import pytest
+from reliability_cases import SCENARIO
+from reliability_samples import Samples
+from reliability_support import ServeProcess, serve_args
+
+from fisheye import FisheyeCamera, camera_to_dict
+
+pytest_plugins = ["reliability_fixtures"]
+
+# In a private mount namespace: root re-mounted read-only, a tmpfs on the registry's folder.
+READ_ONLY_ROOT = ["unshare", "--mount", "sh", "-c",
+                  'mount --rbind / / && mount -o remount,ro,bind / && mount -t tmpfs tmpfs "$FISHLOC_DATA" '
+                  '&& exec "$@"', "sh"]
+
+
+def _namespaces_allowed(folder: Path) -> bool:
+    env = {"FISHLOC_DATA": str(folder), "PATH": "/usr/bin:/bin"}
+    probe = subprocess.run([*READ_ONLY_ROOT, "true"], env=env, capture_output=True, check=False, timeout=30)
+    return probe.returncode == 0
+
+
+def test_serves_from_a_read_only_root(double_model_path: Path, tmp_path: Path,
+                                      demo_camera: FisheyeCamera) -> None:
+    data = tmp_path / "registry"
+    data.mkdir()
+    if not _namespaces_allowed(data):
+        pytest.skip("this machine does not allow mount namespaces (unshare --mount)")
+    env = {"FISHLOC_DATA": str(data)}
+    server = ServeProcess(serve_args(double_model_path, data / "cameras.db"), env, launcher=READ_ONLY_ROOT)
+    with server:
+        server.wait_ready()
+        record = camera_to_dict(demo_camera) | {"id": "ro"}
+        assert httpx.put(f"{server.url}/v1/cameras/ro", json=record).status_code == 201
+        answer = httpx.post(f"{server.url}/v1/cameras/ro/detect", content=Samples(demo_camera).good_jpeg,
+                            headers={"content-type": "image/jpeg"})
+        assert answer.status_code == SCENARIO["read_only_root"].status and answer.json()["detections"]
+    assert "Read-only file system" not in server.log and "Traceback" not in server.log
+    assert not (data / "cameras.db").exists()  # it lived on the namespace's tmpfs, not on the disk
