@@ -11,7 +11,7 @@ import cv2
 import httpx
 import numpy as np
 import pytest
-from conftest import encode, person_frame
+from service_frames import encode, person_frame
 from live_server import LiveServer
 
 from fisheye import FisheyeCamera

@@ -17,7 +17,7 @@ from typing import Any
 import httpx
 import numpy as np
 import pytest
-from conftest import encode, person_frame
+from service_frames import encode, person_frame
 from live_server import LiveServer
 from viewer_browser import chromium_driver, console_errors, save_screenshot, unavailable, wait_for
 
