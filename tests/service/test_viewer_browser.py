@@ -17,8 +17,8 @@ from typing import Any
 import httpx
 import numpy as np
 import pytest
-from service_frames import encode, person_frame
 from live_server import LiveServer
+from service_frames import encode, person_frame
 from viewer_browser import chromium_driver, console_errors, save_screenshot, unavailable, wait_for
 
 from fisheye import FisheyeCamera, camera_to_dict
