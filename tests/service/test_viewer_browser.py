@@ -17,8 +17,8 @@ from typing import Any
 import httpx
 import numpy as np
 import pytest
-from live_server import LiveServer
 from service_frames import encode, person_frame
+from service_live_server import LiveServer
 from viewer_browser import chromium_driver, console_errors, save_screenshot, unavailable, wait_for
 
 from fisheye import FisheyeCamera, camera_to_dict
