@@ -49,6 +49,9 @@ def _random_boxes(count: int, seed: int) -> np.ndarray:
         # Below it (v down): radial axis = +v, tangential = −u.
         (np.array([[500.0, 500.0, 20.0, 40.0]]),
          np.array([[[510.0, 480.0], [490.0, 480.0], [490.0, 520.0], [510.0, 520.0]]])),
+        # Exactly on it: the angle is atan2(0, 0) = 0, so the radial axis is +u as on the right.
+        (np.array([[500.0, 400.0, 20.0, 40.0]]),
+         np.array([[[480.0, 390.0], [480.0, 410.0], [520.0, 410.0], [520.0, 390.0]]])),
     ],
 )
 def test_cxcywh_to_corners_table(cxcywh: np.ndarray, expected: np.ndarray) -> None:
@@ -113,6 +116,17 @@ def test_foot_point_is_the_box_point_nearest_the_principal_point() -> None:
         nearest = samples[np.argmin(np.linalg.norm(samples - PP, axis=1))]
         step = max(box[2], box[3]) / 200
         assert np.linalg.norm(nearest - foot) <= step + 1e-9
+
+
+@pytest.mark.parametrize("wh", [(0.0, 0.0), (20.0, 40.0), (40.0, 20.0), (1e-9, 1e-9), (300.0, 600.0)])
+def test_foot_point_of_a_box_centred_on_the_principal_point_is_the_principal_point(
+    wh: tuple[float, float],
+) -> None:
+    boxes = np.array([[*PP, *wh], [600.0, 400.0, *wh]])
+    feet = foot_points(boxes, PP)
+    np.testing.assert_array_equal(feet[0], PP)
+    # The box beside it keeps the midpoint of its near side (or the principal point once it holds it).
+    np.testing.assert_allclose(feet[1], PP if wh[1] / 2 >= 100 else [600.0 - wh[1] / 2, 400.0])
 
 
 def test_foot_points_do_not_mutate() -> None:
