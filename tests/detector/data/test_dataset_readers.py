@@ -86,3 +86,34 @@ def test_crowd_boxes_are_kept_apart_and_written_back(tmp_path: Path) -> None:
     write_dataset([frame], tmp_path / "again.json")
     (again,) = read_dataset(tmp_path / "again.json")
     np.testing.assert_allclose(again.crowd_cxcywh, frame.crowd_cxcywh)
+
+
+def test_missing_silhouette_boxes_are_stood_in_for_by_the_rotated_box_hull(tmp_path: Path) -> None:
+    document = {
+        "images": [{"id": 1, "file_name": "a.jpg", "width": 101, "height": 101}],
+        "annotations": [
+            {"id": 1, "image_id": 1, "rotated_box": [80, 50, 10, 20]},
+            {"id": 2, "image_id": 1, "rotated_box": [50, 20, 10, 20], "bbox": [44, 9, 11, 22], "area": 150},
+        ],
+    }
+    path = tmp_path / "partial.json"
+    path.write_text(json.dumps(document))
+    (frame,) = read_dataset(path)
+    assert frame.bboxes_xywh is not None and frame.areas_px is not None
+    np.testing.assert_array_equal(frame.bboxes_xywh, [[np.nan] * 4, [44, 9, 11, 22]])
+    np.testing.assert_array_equal(frame.areas_px, [np.nan, 150])
+    write_dataset([frame], tmp_path / "again.json")
+    records = json.loads((tmp_path / "again.json").read_text())["annotations"]
+    # Right of the principal point (50, 50) the radial axis is +u: the hull is 20 wide, 10 high.
+    assert records[0]["bbox"] == [70.0, 45.0, 20.0, 10.0] and records[0]["area"] == 200.0
+    assert records[1]["bbox"] == [44.0, 9.0, 11.0, 22.0] and records[1]["area"] == 150.0
+
+
+def test_a_non_numeric_area_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "bad_area.json"
+    path.write_text(json.dumps({
+        "images": [{"id": 1, "file_name": "a.jpg", "width": 8, "height": 8}],
+        "annotations": [{"id": 1, "image_id": 1, "rotated_box": [1, 2, 3, 4], "area": "big"}],
+    }))
+    with pytest.raises(DatasetFormatError, match="area must be a number"):
+        read_dataset(path)
