@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from detector.data.readers import DatasetFormatError, read_dataset, write_dataset
-from fisheye import radius_aligned_to_cepdof
+from fisheye import foot_points, radius_aligned_to_cepdof
+
+FIXTURES = Path(__file__).parent / "fixtures"
 
 
 def test_fishloc_format_round_trip(toy_dataset: Callable[..., Path], tmp_path: Path) -> None:
@@ -45,6 +47,60 @@ def test_cepdof_boxes_become_radius_aligned_about_the_frame_centre(tmp_path: Pat
     assert frame.camera is None and frame.principal_point == centre
     np.testing.assert_allclose(frame.boxes_cxcywh, radius_aligned, atol=1e-9)
     assert np.all(np.isnan(frame.locations_m)) and np.all(np.isnan(frame.distances_m))
+
+
+# Expected boxes by hand. CEPDOF's h axis is turned clockwise from the image's up direction, so it
+# points along (sin a, -cos a); the side nearer the ray from the frame centre becomes the radial h.
+CEPDOF_SAMPLE = {  # 2048 x 2048, centre (1023.5, 1023.5)
+    "Sample1_000001": (
+        [[1023.5, 523.5, 100.0, 300.0],    # above the centre, a = 0: h upright, on the ray
+         [1523.5, 1023.5, 80.0, 240.0],    # right of it, a = -90: h horizontal, on the ray
+         [1023.5, 1423.5, 200.0, 60.0],    # below it, a = -90: h across the ray, so w is radial
+         [1023.5, 1023.5, 150.0, 120.0],   # on the centre: the ray is +u (angle 0), h at 30° is off it
+         [723.5, 723.5, 90.0, 270.0]],     # up-left, a = -40: 5° off the ray at -45
+        [[1323.5, 723.5, 100.0, 250.0]],   # iscrowd, up-right, a = 50: 5° off the ray at 45
+    ),
+    "Sample1_000002": ([[1423.5, 1423.5, 110.0, 330.0]], []),  # down-right, a = -45: on the ray
+    "Sample1_000003": ([], []),
+}
+WEPDTOF_SAMPLE = {  # 1080 x 1080, centre (539.5, 539.5)
+    "sample_store_000001": (
+        [[539.5, 539.5, 70.0, 90.0],       # on the centre, a = -90: h along +u, the ray there
+         [239.5, 539.5, 50.0, 160.0],      # left, a = -90: on the ray
+         [539.5, 839.5, 60.0, 170.0],      # below, a = 0: on the ray
+         [789.5, 539.5, 120.0, 40.0],      # right, a = 0: h across the ray, so w is radial
+         [289.5, 789.5, 55.0, 150.0]],     # down-left, a = 45: on the ray
+        [],
+    ),
+}
+
+
+@pytest.mark.parametrize(("name", "size", "expected"), [
+    ("cepdof_sample.json", 2048, CEPDOF_SAMPLE),
+    ("wepdtof_sample.json", 1080, WEPDTOF_SAMPLE),
+])
+def test_cepdof_style_files_read_into_radius_aligned_boxes(
+    name: str, size: int, expected: dict[str, tuple[list[list[float]], list[list[float]]]],
+) -> None:
+    """Made-up files in the layout of the real CEPDOF ones: string image ids, `segmentation`,
+    `person_id`, no annotation ids, `bbox` [cx, cy, w, h, angle_deg] with w <= h."""
+    frames = read_dataset(FIXTURES / name)
+    assert [f.image_id for f in frames] == list(expected)
+    centre = ((size - 1) / 2, (size - 1) / 2)
+    for frame in frames:
+        boxes, crowd = expected[str(frame.image_id)]
+        assert frame.camera is None and frame.principal_point == centre
+        assert (frame.width, frame.height) == (size, size)
+        assert frame.path == FIXTURES / f"{frame.image_id}.jpg"
+        np.testing.assert_allclose(frame.boxes_cxcywh, np.array(boxes).reshape(-1, 4), atol=1e-9)
+        np.testing.assert_allclose(frame.crowd_cxcywh, np.array(crowd).reshape(-1, 4), atol=1e-9)
+        assert np.isnan(frame.locations_m).all() and np.isnan(frame.visible_fraction).all()
+        assert frame.bboxes_xywh is not None and np.isnan(frame.bboxes_xywh).all()
+        # Boxes on the centre have their foot point there.
+        on_centre = np.all(frame.boxes_cxcywh[:, :2] == centre, axis=1)
+        np.testing.assert_array_equal(foot_points(frame.boxes_cxcywh[on_centre], centre),
+                                      np.tile(centre, (int(on_centre.sum()), 1)))
+    assert sum(int(np.all(f.boxes_cxcywh[:, :2] == centre, axis=1).sum()) for f in frames) == 1
 
 
 @pytest.mark.parametrize(("content", "message"), [
