@@ -1,7 +1,9 @@
 """Dataset readers: FishLoc/LOAF-style and CEPDOF/WEPDTOF annotation files -> typed frame records.
 
 FishLoc/LOAF-style files (what `fishloc synth` writes) give each person a radius-aligned
-`rotated_box: [cx, cy, w, h]` and a floor position `location_m`, and each image its camera.
+`rotated_box: [cx, cy, w, h]` and a floor position `location_m`, and each image its camera; the
+LOAF release's `rotated_box: [cx, cy, w, h, angle_deg]` (angle counter-clockwise, see
+`fisheye.boxes.loaf_to_radius_aligned`) is read too.
 CEPDOF/WEPDTOF files give `bbox: [cx, cy, w, h, angle_deg]` and no camera; their boxes are turned
 radius-aligned about the image centre. `read_dataset` tells the two apart by their annotations.
 """
@@ -17,7 +19,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fisheye import FisheyeCamera, camera_from_dict, camera_to_dict, cepdof_to_radius_aligned
+from fisheye import (
+    FisheyeCamera,
+    camera_from_dict,
+    camera_to_dict,
+    cepdof_to_radius_aligned,
+    loaf_to_radius_aligned,
+)
 from fisheye.boxes import cxcywh_to_corners
 
 FloatArray = NDArray[np.float64]
@@ -93,6 +101,20 @@ def _numbers(record: Mapping[str, Any], key: str, count: int, where: str) -> lis
         raise DatasetFormatError(f"{where}: {key} must hold numbers, got {value!r}") from None
 
 
+def _rotated_box(annotation: Mapping[str, Any], principal: tuple[float, float], where: str
+                 ) -> list[float]:
+    """A person's radius-aligned box from `rotated_box`: [cx, cy, w, h] as it is, or LOAF's
+    [cx, cy, w, h, angle_deg] turned radius-aligned about the principal point."""
+    value = annotation.get("rotated_box")
+    count = 5 if isinstance(value, Sequence) and len(value) == 5 else 4
+    box = _numbers(annotation, "rotated_box", count, where)
+    if box is None:
+        raise DatasetFormatError(f"{where}: no rotated_box")
+    if count == 5:
+        return loaf_to_radius_aligned(np.asarray([box]), principal)[0].tolist()
+    return box
+
+
 def sniff_format(data: Mapping[str, Any]) -> str:
     """'fishloc' (rotated_box + location_m) or 'cepdof' (5-number bbox) of a loaded COCO dict."""
     annotations = data.get("annotations") or []
@@ -127,9 +149,7 @@ def _frame(image: Mapping[str, Any], annotations: list[Mapping[str, Any]], folde
     for index, annotation in enumerate(annotations):
         at = f"{where} annotation {annotation.get('id', index)!r}"
         if file_format == "fishloc":
-            box = _numbers(annotation, "rotated_box", 4, at)
-            if box is None:
-                raise DatasetFormatError(f"{at}: no rotated_box")
+            box = _rotated_box(annotation, principal, at)
         else:
             raw = _numbers(annotation, "bbox", 5, at)
             if raw is None:
@@ -147,7 +167,10 @@ def _frame(image: Mapping[str, Any], annotations: list[Mapping[str, Any]], folde
         fraction = annotation.get("visible_fraction")
         visible.append(float(fraction) if fraction is not None else np.nan)
         # CEPDOF's bbox is its rotated box and its area that box's: neither is the silhouette's.
-        bbox = _numbers(annotation, "bbox", 4, at) if file_format == "fishloc" else None
+        raw_bbox = annotation.get("bbox") if file_format == "fishloc" else None
+        # Only an axis-aligned [x, y, w, h] is a silhouette box; other forms are left out.
+        bbox = (_numbers(annotation, "bbox", 4, at)
+                if isinstance(raw_bbox, Sequence) and len(raw_bbox) == 4 else None)
         bboxes.append(bbox if bbox is not None else [np.nan] * 4)
         area = annotation.get("area") if file_format == "fishloc" else None
         if area is not None and not isinstance(area, int | float):

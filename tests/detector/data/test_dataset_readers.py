@@ -173,3 +173,48 @@ def test_a_non_numeric_area_is_refused(tmp_path: Path) -> None:
     }))
     with pytest.raises(DatasetFormatError, match="area must be a number"):
         read_dataset(path)
+
+
+def test_loaf_release_rotated_boxes_with_an_angle_become_radius_aligned(tmp_path: Path) -> None:
+    """The LOAF release writes `rotated_box` as [cx, cy, w, h, angle_deg], the angle turning the box
+    counter-clockwise on screen; about the frame centre (511.5, 511.5) of a 1024 px frame:"""
+    document = {
+        "images": [{"id": 7, "file_name": "loaf.jpg", "width": 1024, "height": 1024}],
+        "annotations": [
+            # Up-right of the centre, −45 is radial: kept as it is.
+            {"id": 1, "image_id": 7, "category_id": 1, "rotated_box": [711.5, 311.5, 30, 90, -45],
+             "bbox": [650.0, 250.0, 120.0, 120.0], "area": 2700, "iscrowd": 0},
+            # Left of it, −90 is radial.
+            {"id": 2, "image_id": 7, "category_id": 1, "rotated_box": [211.5, 511.5, 40, 100, -90],
+             "iscrowd": 0},
+            # Below it, −90 lies across the ray: w is the radial side.
+            {"id": 3, "image_id": 7, "category_id": 1, "rotated_box": [511.5, 811.5, 40, 100, -90],
+             "iscrowd": 1},
+            # The plain radius-aligned form in the same file.
+            {"id": 4, "image_id": 7, "category_id": 1, "rotated_box": [511.5, 211.5, 35, 95],
+             "iscrowd": 0},
+        ],
+    }
+    path = tmp_path / "loaf.json"
+    path.write_text(json.dumps(document))
+    (frame,) = read_dataset(path)
+    np.testing.assert_allclose(frame.boxes_cxcywh, [[711.5, 311.5, 30, 90], [211.5, 511.5, 40, 100],
+                                                    [511.5, 211.5, 35, 95]], atol=1e-9)
+    np.testing.assert_allclose(frame.crowd_cxcywh, [[511.5, 811.5, 100, 40]], atol=1e-9)
+    assert frame.bboxes_xywh is not None
+    np.testing.assert_array_equal(frame.bboxes_xywh[0], [650.0, 250.0, 120.0, 120.0])
+    # Written back in the radius-aligned form, it reads the same.
+    write_dataset([frame], tmp_path / "again.json")
+    (again,) = read_dataset(tmp_path / "again.json")
+    np.testing.assert_allclose(again.boxes_cxcywh, frame.boxes_cxcywh, atol=1e-12)
+    np.testing.assert_allclose(again.crowd_cxcywh, frame.crowd_cxcywh, atol=1e-12)
+
+
+def test_rotated_box_of_another_length_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "bad_box.json"
+    path.write_text(json.dumps({
+        "images": [{"id": 1, "file_name": "a.jpg", "width": 8, "height": 8}],
+        "annotations": [{"id": 1, "image_id": 1, "rotated_box": [1, 2, 3]}],
+    }))
+    with pytest.raises(DatasetFormatError, match="rotated_box must hold 4 numbers"):
+        read_dataset(path)
