@@ -7,6 +7,7 @@ from fisheye.boxes import (
     cepdof_to_radius_aligned,
     cxcywh_to_corners,
     foot_points,
+    loaf_to_radius_aligned,
     radial_angles_rad,
     radius_aligned_to_cepdof,
 )
@@ -46,6 +47,7 @@ __all__ = [
     "foot_points",
     "load_camera",
     "load_cameras",
+    "loaf_to_radius_aligned",
     "polygon_iou",
     "radial_angles_rad",
     "radius_aligned_to_cepdof",

@@ -104,6 +104,21 @@ def cepdof_to_radius_aligned(cxcywha: ArrayLike, principal_point: ArrayLike) -> 
     return np.stack([boxes[:, 0], boxes[:, 1], tangential_extent, radial_extent], axis=1)
 
 
+def loaf_to_radius_aligned(cxcywha: ArrayLike, principal_point: ArrayLike) -> FloatArray:
+    """(N, 5) LOAF boxes `[cx, cy, w, h, angle_deg]` -> (N, 4) radius-aligned `cxcywh`.
+
+    LOAF's angle turns the box counter-clockwise on screen, the opposite sense to CEPDOF's, so the
+    `h` axis points along (sin a, cos a): CEPDOF's axis for the angle −a. Source: the public
+    helpers that read LOAF's `annotations/resolution_*/instances_*.json` (`vis_rotatedbox` turns a
+    corner offset (dx, dy) into (dx·cos a + dy·sin a, −dx·sin a + dy·cos a); `bbox2rotatedbox` sets
+    a = polar angle of the centre (counter-clockwise, y up) − 90°, or − 270° below the centre, which
+    with that rotation puts `h` on the ray, as the paper's radius-aligned boxes have it). A
+    radius-aligned box comes back unchanged.
+    """
+    boxes = as_points(cxcywha, 5, "cxcywha")
+    return cepdof_to_radius_aligned(boxes * np.array([1.0, 1.0, 1.0, 1.0, -1.0]), principal_point)
+
+
 def radius_aligned_to_cepdof(cxcywh: ArrayLike, principal_point: ArrayLike) -> FloatArray:
     """(N, 4) radius-aligned boxes -> (N, 5) CEPDOF boxes `[cx, cy, w, h, angle_deg]` with w ≤ h and
     the angle in [-90, 90)."""

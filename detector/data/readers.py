@@ -1,7 +1,9 @@
 """Dataset readers: FishLoc/LOAF-style and CEPDOF/WEPDTOF annotation files -> typed frame records.
 
 FishLoc/LOAF-style files (what `fishloc synth` writes) give each person a radius-aligned
-`rotated_box: [cx, cy, w, h]` and a floor position `location_m`, and each image its camera.
+`rotated_box: [cx, cy, w, h]` and a floor position `location_m`, and each image its camera; the
+LOAF release's `rotated_box: [cx, cy, w, h, angle_deg]` (angle counter-clockwise, see
+`fisheye.boxes.loaf_to_radius_aligned`) is read too.
 CEPDOF/WEPDTOF files give `bbox: [cx, cy, w, h, angle_deg]` and no camera; their boxes are turned
 radius-aligned about the image centre. `read_dataset` tells the two apart by their annotations.
 """
@@ -17,7 +19,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fisheye import FisheyeCamera, camera_from_dict, camera_to_dict, cepdof_to_radius_aligned
+from fisheye import (
+    FisheyeCamera,
+    camera_from_dict,
+    camera_to_dict,
+    cepdof_to_radius_aligned,
+    loaf_to_radius_aligned,
+)
 from fisheye.boxes import cxcywh_to_corners
 
 FloatArray = NDArray[np.float64]
@@ -32,9 +40,11 @@ class DatasetFormatError(ValueError):
 class FrameAnnotations:
     """One frame and its people: `boxes_cxcywh` (N, 4) frame px radius-aligned about
     `principal_point`; `locations_m` (N, 2) floor metres, `distances_m` (N,) metres from the nadir
-    and `visible_fraction` (N,), NaN where the file does not say. `crowd_cxcywh` (M, 4) are the
-    boxes marked `iscrowd` (people too hidden to count): evaluation neither rewards nor penalises
-    detections on them, training leaves them out."""
+    and `visible_fraction` (N,), NaN where the file does not say. `bboxes_xywh` (N, 4) px and
+    `areas_px` (N,) are the file's axis-aligned `bbox` and `area` of each person's silhouette (NaN
+    where it gives none; None when the frame was not read from a file). `crowd_cxcywh` (M, 4) are
+    the boxes marked `iscrowd` (people too hidden to count): evaluation neither rewards nor
+    penalises detections on them, training leaves them out."""
 
     path: Path
     image_id: int | str
@@ -48,15 +58,21 @@ class FrameAnnotations:
     distances_m: FloatArray
     visible_fraction: FloatArray
     crowd_cxcywh: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
+    bboxes_xywh: FloatArray | None = None
+    areas_px: FloatArray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.boxes_cxcywh)
         if (self.boxes_cxcywh.shape != (n, 4) or self.locations_m.shape != (n, 2)
-                or self.distances_m.shape != (n,) or self.visible_fraction.shape != (n,)):
+                or self.distances_m.shape != (n,) or self.visible_fraction.shape != (n,)
+                or (self.bboxes_xywh is not None and self.bboxes_xywh.shape != (n, 4))
+                or (self.areas_px is not None and self.areas_px.shape != (n,))):
             raise ValueError(
                 f"{self.path}: arrays disagree: boxes {self.boxes_cxcywh.shape}, locations "
                 f"{self.locations_m.shape}, distances {self.distances_m.shape}, "
-                f"visible {self.visible_fraction.shape}"
+                f"visible {self.visible_fraction.shape}, bboxes "
+                f"{None if self.bboxes_xywh is None else self.bboxes_xywh.shape}, areas "
+                f"{None if self.areas_px is None else self.areas_px.shape}"
             )
         if self.camera is not None and tuple(self.camera.image_size) != (self.width, self.height):
             raise ValueError(f"{self.path}: camera is calibrated at {self.camera.image_size}, "
@@ -83,6 +99,20 @@ def _numbers(record: Mapping[str, Any], key: str, count: int, where: str) -> lis
         return [float(v) for v in value]
     except (TypeError, ValueError):
         raise DatasetFormatError(f"{where}: {key} must hold numbers, got {value!r}") from None
+
+
+def _rotated_box(annotation: Mapping[str, Any], principal: tuple[float, float], where: str
+                 ) -> list[float]:
+    """A person's radius-aligned box from `rotated_box`: [cx, cy, w, h] as it is, or LOAF's
+    [cx, cy, w, h, angle_deg] turned radius-aligned about the principal point."""
+    value = annotation.get("rotated_box")
+    count = 5 if isinstance(value, Sequence) and len(value) == 5 else 4
+    box = _numbers(annotation, "rotated_box", count, where)
+    if box is None:
+        raise DatasetFormatError(f"{where}: no rotated_box")
+    if count == 5:
+        return loaf_to_radius_aligned(np.asarray([box]), principal)[0].tolist()
+    return box
 
 
 def sniff_format(data: Mapping[str, Any]) -> str:
@@ -114,12 +144,12 @@ def _frame(image: Mapping[str, Any], annotations: list[Mapping[str, Any]], folde
             raise DatasetFormatError(f"{where}: {error}") from None
     principal = camera.principal_point if camera is not None else ((width - 1) / 2, (height - 1) / 2)
     boxes, locations, distances, visible, crowd = [], [], [], [], []
+    bboxes: list[list[float]] = []
+    areas: list[float] = []
     for index, annotation in enumerate(annotations):
         at = f"{where} annotation {annotation.get('id', index)!r}"
         if file_format == "fishloc":
-            box = _numbers(annotation, "rotated_box", 4, at)
-            if box is None:
-                raise DatasetFormatError(f"{at}: no rotated_box")
+            box = _rotated_box(annotation, principal, at)
         else:
             raw = _numbers(annotation, "bbox", 5, at)
             if raw is None:
@@ -136,6 +166,16 @@ def _frame(image: Mapping[str, Any], annotations: list[Mapping[str, Any]], folde
         distances.append(float(distance) if distance is not None else float(np.hypot(*xy)))
         fraction = annotation.get("visible_fraction")
         visible.append(float(fraction) if fraction is not None else np.nan)
+        # CEPDOF's bbox is its rotated box and its area that box's: neither is the silhouette's.
+        raw_bbox = annotation.get("bbox") if file_format == "fishloc" else None
+        # Only an axis-aligned [x, y, w, h] is a silhouette box; other forms are left out.
+        bbox = (_numbers(annotation, "bbox", 4, at)
+                if isinstance(raw_bbox, Sequence) and len(raw_bbox) == 4 else None)
+        bboxes.append(bbox if bbox is not None else [np.nan] * 4)
+        area = annotation.get("area") if file_format == "fishloc" else None
+        if area is not None and not isinstance(area, int | float):
+            raise DatasetFormatError(f"{at}: area must be a number, got {area!r}")
+        areas.append(float(area) if area is not None else np.nan)
     n = len(boxes)
     return FrameAnnotations(
         path=path,
@@ -150,6 +190,8 @@ def _frame(image: Mapping[str, Any], annotations: list[Mapping[str, Any]], folde
         distances_m=np.asarray(distances, dtype=np.float64).reshape(n),
         visible_fraction=np.asarray(visible, dtype=np.float64).reshape(n),
         crowd_cxcywh=np.asarray(crowd, dtype=np.float64).reshape(-1, 4),
+        bboxes_xywh=np.asarray(bboxes, dtype=np.float64).reshape(n, 4),
+        areas_px=np.asarray(areas, dtype=np.float64).reshape(n),
     )
 
 
@@ -176,17 +218,23 @@ def read_dataset(path: str | Path) -> list[FrameAnnotations]:
 
 
 def _annotation_record(frame: FrameAnnotations, index: int, next_id: int) -> dict[str, Any]:
+    """A person's record; the silhouette's bbox and area are kept where the frame has them, else
+    stood in for by the rotated box's axis-aligned hull and area."""
     box = frame.boxes_cxcywh[index]
-    corners = cxcywh_to_corners(box[None], frame.principal_point)[0]
-    x0, y0 = corners.min(axis=0)
-    x1, y1 = corners.max(axis=0)
+    bbox = None if frame.bboxes_xywh is None else frame.bboxes_xywh[index]
+    if bbox is None or not np.all(np.isfinite(bbox)):
+        corners = cxcywh_to_corners(box[None], frame.principal_point)[0]
+        x0, y0 = corners.min(axis=0)
+        x1, y1 = corners.max(axis=0)
+        bbox = np.array([x0, y0, x1 - x0, y1 - y0])
+    area = np.nan if frame.areas_px is None else frame.areas_px[index]
     record: dict[str, Any] = {
         "id": next_id,
         "image_id": frame.image_id,
         "category_id": 1,
         "rotated_box": [float(v) for v in box],
-        "bbox": [float(x0), float(y0), float(x1 - x0), float(y1 - y0)],
-        "area": float(box[2] * box[3]),
+        "bbox": [float(v) for v in bbox],
+        "area": float(area) if np.isfinite(area) else float(box[2] * box[3]),
         "iscrowd": 0,
     }
     if np.all(np.isfinite(frame.locations_m[index])):

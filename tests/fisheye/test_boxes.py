@@ -12,6 +12,7 @@ from fisheye.boxes import (
     corners_to_cxcywh,
     cxcywh_to_corners,
     foot_points,
+    loaf_to_radius_aligned,
     radial_angles_rad,
     radius_aligned_to_cepdof,
 )
@@ -27,6 +28,19 @@ def _cepdof_reference_corners(box: np.ndarray) -> np.ndarray:
     rotation = np.array([[c, s], [-s, c]])
     local = np.array([[-w / 2, -h / 2], [w / 2, -h / 2], [w / 2, h / 2], [-w / 2, h / 2]])
     return np.array([cx, cy]) + local @ rotation
+
+
+def _loaf_reference(box: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A radius-aligned box as LOAF writes it, `[cx, cy, w, h, angle_deg]`, and that box's corners
+    drawn LOAF's way: the angle is the centre's polar angle (counter-clockwise, y up) − 90°, or
+    − 270° from 180° on; a corner offset (dx, dy) turns into (dx·c + dy·s, −dx·s + dy·c)."""
+    cx, cy, w, h = box
+    polar = math.degrees(math.atan2(-(cy - PP[1]), cx - PP[0])) % 360.0
+    angle = polar - 90.0 if polar < 180.0 else polar - 270.0
+    c, s = math.cos(math.radians(angle)), math.sin(math.radians(angle))
+    local = np.array([[-w / 2, -h / 2], [w / 2, -h / 2], [w / 2, h / 2], [-w / 2, h / 2]])
+    turned = np.stack([local[:, 0] * c + local[:, 1] * s, -local[:, 0] * s + local[:, 1] * c], axis=1)
+    return np.array([cx, cy, w, h, angle]), np.array([cx, cy]) + turned
 
 
 def _same_point_set(a: np.ndarray, b: np.ndarray, atol: float) -> bool:
@@ -49,6 +63,9 @@ def _random_boxes(count: int, seed: int) -> np.ndarray:
         # Below it (v down): radial axis = +v, tangential = −u.
         (np.array([[500.0, 500.0, 20.0, 40.0]]),
          np.array([[[510.0, 480.0], [490.0, 480.0], [490.0, 520.0], [510.0, 520.0]]])),
+        # Exactly on it: the angle is atan2(0, 0) = 0, so the radial axis is +u as on the right.
+        (np.array([[500.0, 400.0, 20.0, 40.0]]),
+         np.array([[[480.0, 390.0], [480.0, 410.0], [520.0, 410.0], [520.0, 390.0]]])),
     ],
 )
 def test_cxcywh_to_corners_table(cxcywh: np.ndarray, expected: np.ndarray) -> None:
@@ -113,6 +130,17 @@ def test_foot_point_is_the_box_point_nearest_the_principal_point() -> None:
         nearest = samples[np.argmin(np.linalg.norm(samples - PP, axis=1))]
         step = max(box[2], box[3]) / 200
         assert np.linalg.norm(nearest - foot) <= step + 1e-9
+
+
+@pytest.mark.parametrize("wh", [(0.0, 0.0), (20.0, 40.0), (40.0, 20.0), (1e-9, 1e-9), (300.0, 600.0)])
+def test_foot_point_of_a_box_centred_on_the_principal_point_is_the_principal_point(
+    wh: tuple[float, float],
+) -> None:
+    boxes = np.array([[*PP, *wh], [600.0, 400.0, *wh]])
+    feet = foot_points(boxes, PP)
+    np.testing.assert_array_equal(feet[0], PP)
+    # The box beside it keeps the midpoint of its near side (or the principal point once it holds it).
+    np.testing.assert_allclose(feet[1], PP if wh[1] / 2 >= 100 else [600.0 - wh[1] / 2, 400.0])
 
 
 def test_foot_points_do_not_mutate() -> None:
@@ -180,6 +208,37 @@ def test_cepdof_to_radius_aligned_table(cepdof: np.ndarray, expected: np.ndarray
     np.testing.assert_allclose(cepdof_to_radius_aligned(cepdof, PP), expected, atol=1e-9)
 
 
+@pytest.mark.parametrize(
+    ("loaf", "expected"),
+    [
+        (np.zeros((0, 5)), np.zeros((0, 4))),
+        # Above the principal point the ray is vertical: angle 0 is radial.
+        (np.array([[500.0, 300.0, 20.0, 40.0, 0.0]]), np.array([[500.0, 300.0, 20.0, 40.0]])),
+        # Right of it the ray is horizontal: −90 turns h onto it.
+        (np.array([[600.0, 400.0, 20.0, 40.0, -90.0]]), np.array([[600.0, 400.0, 20.0, 40.0]])),
+        # Up-right, −45 is radial (counter-clockwise); CEPDOF's clockwise −45 would lie across it.
+        (np.array([[600.0, 300.0, 20.0, 40.0, -45.0]]), np.array([[600.0, 300.0, 20.0, 40.0]])),
+        (np.array([[600.0, 300.0, 20.0, 40.0, 45.0]]), np.array([[600.0, 300.0, 40.0, 20.0]])),
+        # Down-right, 45 is radial.
+        (np.array([[600.0, 500.0, 20.0, 40.0, 45.0]]), np.array([[600.0, 500.0, 20.0, 40.0]])),
+        # On the principal point the ray is +u (angle 0): −90 is radial there.
+        (np.array([[500.0, 400.0, 20.0, 40.0, -90.0]]), np.array([[500.0, 400.0, 20.0, 40.0]])),
+    ],
+)
+def test_loaf_to_radius_aligned_table(loaf: np.ndarray, expected: np.ndarray) -> None:
+    np.testing.assert_allclose(loaf_to_radius_aligned(loaf, PP), expected, atol=1e-9)
+
+
+def test_loaf_boxes_of_radius_aligned_boxes_convert_back_and_cover_the_same_rectangle() -> None:
+    boxes = _random_boxes(300, 8)
+    references = [_loaf_reference(box) for box in boxes]
+    loaf = np.array([loaf_box for loaf_box, _ in references])
+    assert ((loaf[:, 4] >= -90) & (loaf[:, 4] < 90)).all()
+    np.testing.assert_allclose(loaf_to_radius_aligned(loaf, PP), boxes, atol=1e-9)
+    for quad, (_, reference) in zip(cxcywh_to_corners(boxes, PP), references, strict=True):
+        assert _same_point_set(quad, reference, atol=1e-7)
+
+
 def test_cepdof_boxes_around_the_principal_point_convert() -> None:
     boxes = np.array([[500.0, 400.0, 30.0, 60.0, 10.0], [501.0, 400.0, 30.0, 60.0, 0.0]])
     radius_aligned = cepdof_to_radius_aligned(boxes, PP)
@@ -190,8 +249,8 @@ def test_cepdof_boxes_around_the_principal_point_convert() -> None:
 
 @pytest.mark.parametrize(
     ("function", "bad"),
-    [(cxcywh_to_corners, np.zeros((2, 5))), (foot_points, np.zeros((4,))), (cepdof_to_radius_aligned,
-                                                                              np.zeros((2, 4)))],
+    [(cxcywh_to_corners, np.zeros((2, 5))), (foot_points, np.zeros((4,))),
+     (cepdof_to_radius_aligned, np.zeros((2, 4))), (loaf_to_radius_aligned, np.zeros((2, 4)))],
 )
 def test_wrong_box_shapes_are_refused(function: object, bad: np.ndarray) -> None:
     with pytest.raises(ValueError, match="must have shape"):

@@ -1,4 +1,5 @@
 import math
+import re
 from typing import Any
 
 import cv2
@@ -240,6 +241,8 @@ def test_scaled_to_same_size_is_the_camera_and_other_aspect_is_refused() -> None
         ("kb", [1.0, 0.0, 0.0, 0.0, 0.0, 0.0], "kb"),
         ("kb", [1.0, float("nan")], "kb.1"),
         ("kb", [1.0, float("inf")], "kb.1"),
+        ("kb", [1.0, 2000.0], "kb coefficients must lie within ±1000"),
+        ("kb", [1.0, 0.0, -2000.0], "kb coefficients must lie within ±1000"),
         ("altitude_m", 0.0, "altitude_m"),
         ("altitude_m", -3.2, "altitude_m"),
         ("altitude_m", float("nan"), "altitude_m"),
@@ -251,6 +254,8 @@ def test_scaled_to_same_size_is_the_camera_and_other_aspect_is_refused() -> None
         ("focal_px", [940.0, float("inf")], "focal_px"),
         ("image_size", [1, 2952], "image_size"),
         ("image_size", [2952], "image_size"),
+        ("image_size", [30000, 30000], "image_size must be within [2, 20000] px"),
+        ("image_size", [20001, 2952], "image_size must be within [2, 20000] px"),
         ("id", "lobby 1", "id"),
         ("id", "", "id"),
         ("id", "-lobby", "id"),
@@ -262,8 +267,13 @@ def test_scaled_to_same_size_is_the_camera_and_other_aspect_is_refused() -> None
     ],
 )
 def test_refused_calibrations_name_the_field(field: str, value: Any, message: str) -> None:
-    with pytest.raises(CalibrationError, match=message.replace(".", r"\.")):
+    with pytest.raises(CalibrationError, match=re.escape(message)):
         camera_from_dict({**BASE, field: value})
+
+
+def test_calibrations_at_the_limits_are_accepted() -> None:
+    assert camera_from_dict({**BASE, "kb": [1.0, 1000.0]}).kb == [1.0, 1000.0]
+    assert camera_from_dict({**BASE, "image_size": [20000, 20000]}).image_size == (20000, 20000)
 
 
 def test_monotonicity_is_checked_up_to_max_theta_only() -> None:

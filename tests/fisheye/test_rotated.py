@@ -140,6 +140,41 @@ def test_nan_boxes_have_zero_iou() -> None:
     assert iou[0, 0] == 0.0 and iou[1, 1] == pytest.approx(1.0)
 
 
+# A box centred exactly on the principal point has angle atan2(0, 0) = 0: its h axis lies along +u.
+AT_PP = np.array([512.0, 512.0, 20.0, 40.0])
+
+
+@pytest.mark.parametrize(
+    ("other", "expected"),
+    [
+        (AT_PP, 1.0),
+        (np.array([512.0, 512.0, 40.0, 20.0]), 400 / 1200),  # the same box turned 90°: a cross
+        (np.array([522.0, 512.0, 20.0, 40.0]), 600 / 1000),  # 10 px right: h along +u too
+        (np.array([512.0, 522.0, 20.0, 40.0]), 400 / 1200),  # 10 px down: h along +v
+        (np.array([512.0, 502.0, 20.0, 40.0]), 400 / 1200),  # 10 px up: h along −v
+        (np.array([542.0, 512.0, 20.0, 40.0]), 200 / 1400),  # touching only by 10 px of h
+    ],
+)
+def test_rotated_iou_of_boxes_on_the_principal_point(other: np.ndarray, expected: float) -> None:
+    iou = rotated_iou(AT_PP[None], other[None], PP)[0, 0]
+    assert iou == pytest.approx(expected, abs=1e-12)
+    assert rotated_iou(other[None], AT_PP[None], PP)[0, 0] == pytest.approx(iou, abs=1e-12)
+
+
+def test_rotated_nms_of_boxes_on_the_principal_point() -> None:
+    boxes = np.array([
+        AT_PP,                          # best
+        AT_PP,                          # its twin
+        [512.0, 512.0, 40.0, 20.0],     # same centre, turned: IoU 1/3 with the best
+        [522.0, 512.0, 20.0, 40.0],     # 10 px right: IoU 0.6 with the best, 1/3 with the turned one
+    ])
+    scores = np.array([0.9, 0.8, 0.7, 0.6])
+    assert rotated_nms(boxes, scores, PP, iou_threshold=0.5).tolist() == [0, 2]
+    assert rotated_nms(boxes, scores, PP, iou_threshold=0.7).tolist() == [0, 2, 3]
+    # Scores reversed: the right-hand box now leads and suppresses both boxes on the principal point.
+    assert rotated_nms(boxes, scores[::-1], PP, iou_threshold=0.5).tolist() == [3, 2]
+
+
 def test_rotated_nms_hand_made() -> None:
     # A and B overlap (IoU 2/3), C overlaps neither; D is B's twin with the lowest score.
     boxes = np.array([

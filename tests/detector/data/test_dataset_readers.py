@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from detector.data.readers import DatasetFormatError, read_dataset, write_dataset
-from fisheye import radius_aligned_to_cepdof
+from fisheye import foot_points, radius_aligned_to_cepdof
+
+FIXTURES = Path(__file__).parent / "fixtures"
 
 
 def test_fishloc_format_round_trip(toy_dataset: Callable[..., Path], tmp_path: Path) -> None:
@@ -45,6 +47,60 @@ def test_cepdof_boxes_become_radius_aligned_about_the_frame_centre(tmp_path: Pat
     assert frame.camera is None and frame.principal_point == centre
     np.testing.assert_allclose(frame.boxes_cxcywh, radius_aligned, atol=1e-9)
     assert np.all(np.isnan(frame.locations_m)) and np.all(np.isnan(frame.distances_m))
+
+
+# Expected boxes by hand. CEPDOF's h axis is turned clockwise from the image's up direction, so it
+# points along (sin a, -cos a); the side nearer the ray from the frame centre becomes the radial h.
+CEPDOF_SAMPLE = {  # 2048 x 2048, centre (1023.5, 1023.5)
+    "Sample1_000001": (
+        [[1023.5, 523.5, 100.0, 300.0],    # above the centre, a = 0: h upright, on the ray
+         [1523.5, 1023.5, 80.0, 240.0],    # right of it, a = -90: h horizontal, on the ray
+         [1023.5, 1423.5, 200.0, 60.0],    # below it, a = -90: h across the ray, so w is radial
+         [1023.5, 1023.5, 150.0, 120.0],   # on the centre: the ray is +u (angle 0), h at 30° is off it
+         [723.5, 723.5, 90.0, 270.0]],     # up-left, a = -40: 5° off the ray at -45
+        [[1323.5, 723.5, 100.0, 250.0]],   # iscrowd, up-right, a = 50: 5° off the ray at 45
+    ),
+    "Sample1_000002": ([[1423.5, 1423.5, 110.0, 330.0]], []),  # down-right, a = -45: on the ray
+    "Sample1_000003": ([], []),
+}
+WEPDTOF_SAMPLE = {  # 1080 x 1080, centre (539.5, 539.5)
+    "sample_store_000001": (
+        [[539.5, 539.5, 70.0, 90.0],       # on the centre, a = -90: h along +u, the ray there
+         [239.5, 539.5, 50.0, 160.0],      # left, a = -90: on the ray
+         [539.5, 839.5, 60.0, 170.0],      # below, a = 0: on the ray
+         [789.5, 539.5, 120.0, 40.0],      # right, a = 0: h across the ray, so w is radial
+         [289.5, 789.5, 55.0, 150.0]],     # down-left, a = 45: on the ray
+        [],
+    ),
+}
+
+
+@pytest.mark.parametrize(("name", "size", "expected"), [
+    ("cepdof_sample.json", 2048, CEPDOF_SAMPLE),
+    ("wepdtof_sample.json", 1080, WEPDTOF_SAMPLE),
+])
+def test_cepdof_style_files_read_into_radius_aligned_boxes(
+    name: str, size: int, expected: dict[str, tuple[list[list[float]], list[list[float]]]],
+) -> None:
+    """Made-up files in the layout of the real CEPDOF ones: string image ids, `segmentation`,
+    `person_id`, no annotation ids, `bbox` [cx, cy, w, h, angle_deg] with w <= h."""
+    frames = read_dataset(FIXTURES / name)
+    assert [f.image_id for f in frames] == list(expected)
+    centre = ((size - 1) / 2, (size - 1) / 2)
+    for frame in frames:
+        boxes, crowd = expected[str(frame.image_id)]
+        assert frame.camera is None and frame.principal_point == centre
+        assert (frame.width, frame.height) == (size, size)
+        assert frame.path == FIXTURES / f"{frame.image_id}.jpg"
+        np.testing.assert_allclose(frame.boxes_cxcywh, np.array(boxes).reshape(-1, 4), atol=1e-9)
+        np.testing.assert_allclose(frame.crowd_cxcywh, np.array(crowd).reshape(-1, 4), atol=1e-9)
+        assert np.isnan(frame.locations_m).all() and np.isnan(frame.visible_fraction).all()
+        assert frame.bboxes_xywh is not None and np.isnan(frame.bboxes_xywh).all()
+        # Boxes on the centre have their foot point there.
+        on_centre = np.all(frame.boxes_cxcywh[:, :2] == centre, axis=1)
+        np.testing.assert_array_equal(foot_points(frame.boxes_cxcywh[on_centre], centre),
+                                      np.tile(centre, (int(on_centre.sum()), 1)))
+    assert sum(int(np.all(f.boxes_cxcywh[:, :2] == centre, axis=1).sum()) for f in frames) == 1
 
 
 @pytest.mark.parametrize(("content", "message"), [
@@ -86,3 +142,79 @@ def test_crowd_boxes_are_kept_apart_and_written_back(tmp_path: Path) -> None:
     write_dataset([frame], tmp_path / "again.json")
     (again,) = read_dataset(tmp_path / "again.json")
     np.testing.assert_allclose(again.crowd_cxcywh, frame.crowd_cxcywh)
+
+
+def test_missing_silhouette_boxes_are_stood_in_for_by_the_rotated_box_hull(tmp_path: Path) -> None:
+    document = {
+        "images": [{"id": 1, "file_name": "a.jpg", "width": 101, "height": 101}],
+        "annotations": [
+            {"id": 1, "image_id": 1, "rotated_box": [80, 50, 10, 20]},
+            {"id": 2, "image_id": 1, "rotated_box": [50, 20, 10, 20], "bbox": [44, 9, 11, 22], "area": 150},
+        ],
+    }
+    path = tmp_path / "partial.json"
+    path.write_text(json.dumps(document))
+    (frame,) = read_dataset(path)
+    assert frame.bboxes_xywh is not None and frame.areas_px is not None
+    np.testing.assert_array_equal(frame.bboxes_xywh, [[np.nan] * 4, [44, 9, 11, 22]])
+    np.testing.assert_array_equal(frame.areas_px, [np.nan, 150])
+    write_dataset([frame], tmp_path / "again.json")
+    records = json.loads((tmp_path / "again.json").read_text())["annotations"]
+    # Right of the principal point (50, 50) the radial axis is +u: the hull is 20 wide, 10 high.
+    assert records[0]["bbox"] == [70.0, 45.0, 20.0, 10.0] and records[0]["area"] == 200.0
+    assert records[1]["bbox"] == [44.0, 9.0, 11.0, 22.0] and records[1]["area"] == 150.0
+
+
+def test_a_non_numeric_area_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "bad_area.json"
+    path.write_text(json.dumps({
+        "images": [{"id": 1, "file_name": "a.jpg", "width": 8, "height": 8}],
+        "annotations": [{"id": 1, "image_id": 1, "rotated_box": [1, 2, 3, 4], "area": "big"}],
+    }))
+    with pytest.raises(DatasetFormatError, match="area must be a number"):
+        read_dataset(path)
+
+
+def test_loaf_release_rotated_boxes_with_an_angle_become_radius_aligned(tmp_path: Path) -> None:
+    """The LOAF release writes `rotated_box` as [cx, cy, w, h, angle_deg], the angle turning the box
+    counter-clockwise on screen; about the frame centre (511.5, 511.5) of a 1024 px frame:"""
+    document = {
+        "images": [{"id": 7, "file_name": "loaf.jpg", "width": 1024, "height": 1024}],
+        "annotations": [
+            # Up-right of the centre, −45 is radial: kept as it is.
+            {"id": 1, "image_id": 7, "category_id": 1, "rotated_box": [711.5, 311.5, 30, 90, -45],
+             "bbox": [650.0, 250.0, 120.0, 120.0], "area": 2700, "iscrowd": 0},
+            # Left of it, −90 is radial.
+            {"id": 2, "image_id": 7, "category_id": 1, "rotated_box": [211.5, 511.5, 40, 100, -90],
+             "iscrowd": 0},
+            # Below it, −90 lies across the ray: w is the radial side.
+            {"id": 3, "image_id": 7, "category_id": 1, "rotated_box": [511.5, 811.5, 40, 100, -90],
+             "iscrowd": 1},
+            # The plain radius-aligned form in the same file.
+            {"id": 4, "image_id": 7, "category_id": 1, "rotated_box": [511.5, 211.5, 35, 95],
+             "iscrowd": 0},
+        ],
+    }
+    path = tmp_path / "loaf.json"
+    path.write_text(json.dumps(document))
+    (frame,) = read_dataset(path)
+    np.testing.assert_allclose(frame.boxes_cxcywh, [[711.5, 311.5, 30, 90], [211.5, 511.5, 40, 100],
+                                                    [511.5, 211.5, 35, 95]], atol=1e-9)
+    np.testing.assert_allclose(frame.crowd_cxcywh, [[511.5, 811.5, 100, 40]], atol=1e-9)
+    assert frame.bboxes_xywh is not None
+    np.testing.assert_array_equal(frame.bboxes_xywh[0], [650.0, 250.0, 120.0, 120.0])
+    # Written back in the radius-aligned form, it reads the same.
+    write_dataset([frame], tmp_path / "again.json")
+    (again,) = read_dataset(tmp_path / "again.json")
+    np.testing.assert_allclose(again.boxes_cxcywh, frame.boxes_cxcywh, atol=1e-12)
+    np.testing.assert_allclose(again.crowd_cxcywh, frame.crowd_cxcywh, atol=1e-12)
+
+
+def test_rotated_box_of_another_length_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "bad_box.json"
+    path.write_text(json.dumps({
+        "images": [{"id": 1, "file_name": "a.jpg", "width": 8, "height": 8}],
+        "annotations": [{"id": 1, "image_id": 1, "rotated_box": [1, 2, 3]}],
+    }))
+    with pytest.raises(DatasetFormatError, match="rotated_box must hold 4 numbers"):
+        read_dataset(path)

@@ -5,6 +5,7 @@ from functools import cache
 import numpy as np
 import pytest
 
+from detector.data.ground_truth import PersonTruth
 from detector.data.synth import SynthConfig, SynthFrame, render_frame, render_frame_with_ids
 from fisheye import cxcywh_to_corners, foot_points, load_camera
 from models import DEMO_CAMERA_PATH
@@ -15,6 +16,8 @@ CONFIGS = {
     "demo": SynthConfig(size=288, kind="indoor", people=(2, 6), camera=load_camera(DEMO_CAMERA_PATH)),
 }
 CASES = [(name, index) for name in CONFIGS for index in range(3)]
+# The floor-truth checks are statistics: they use more frames of the same sets.
+LOCATION_CASES = [(name, index) for name in CONFIGS for index in range(6)]
 
 
 @cache
@@ -22,21 +25,47 @@ def _frame(name: str, index: int) -> tuple[SynthFrame, np.ndarray]:
     return render_frame_with_ids(11, "seen", index, CONFIGS[name])
 
 
-@pytest.mark.parametrize(("name", "index"), CASES)
-def test_location_projects_to_the_foot_region(name: str, index: int) -> None:
-    """The floor point between the feet projects near the box's foot point: within half the box's
-    long side for unoccluded people (shoes, and bodies seen from right above, reach nearer the
-    principal point than the ankles), within the long side for partly hidden ones."""
+def _located_people(name: str, index: int) -> list[tuple[PersonTruth, np.ndarray, np.ndarray]]:
+    """(person, its rotated box, its location_m in pixels) for the people of a frame that are no
+    ignore regions."""
     frame, _ = _frame(name, index)
     people = [p for p in frame.people if not p.ignore]
-    assert people, "every test frame should show someone"
-    boxes = np.array([p.rotated_box for p in people])
-    feet = foot_points(boxes, frame.camera.principal_point)
-    located = frame.camera.floor_to_pixels(np.array([p.location_m for p in people]))
-    for person, box, foot, uv in zip(people, boxes, feet, located, strict=True):
-        share = 0.5 if person.visible_fraction >= 0.9 else 1.0
-        tolerance = share * max(box[2], box[3]) + 2.0
-        assert np.hypot(*(uv - foot)) <= tolerance, (box, foot, uv)
+    located = frame.camera.floor_to_pixels(np.array([p.location_m for p in people]).reshape(-1, 2))
+    return [(p, np.asarray(p.rotated_box), uv) for p, uv in zip(people, located, strict=True)]
+
+
+def test_location_projects_near_the_foot_point() -> None:
+    """Over the set, the projected floor point between the feet lies a median 0.10 box lengths (h)
+    from the box's foot point, 90th percentile 0.31, on the 69 people of these 18 frames; shoes, and
+    bodies seen from right above, reach nearer the principal point than the ankles."""
+    ratios = []
+    for name, index in LOCATION_CASES:
+        frame, _ = _frame(name, index)
+        people = _located_people(name, index)
+        assert people, "every test frame should show someone"
+        boxes = np.array([box for _, box, _ in people])
+        feet = foot_points(boxes, frame.camera.principal_point)
+        located = np.array([uv for _, _, uv in people])
+        ratios.extend(np.hypot(*(located - feet).T) / boxes[:, 3])
+    assert len(ratios) >= 60
+    assert np.median(ratios) < 0.15
+    assert np.quantile(ratios, 0.9) < 0.35
+
+
+@pytest.mark.parametrize(("name", "index"), LOCATION_CASES)
+def test_location_lies_in_the_near_half_of_the_box(name: str, index: int) -> None:
+    """For fully visible people the projected location lies in the half of the box nearer the
+    principal point (up to a pixel of rasterisation)."""
+    frame, _ = _frame(name, index)
+    pp = np.asarray(frame.camera.principal_point)
+    for person, box, uv in _located_people(name, index):
+        if person.visible_fraction < 0.99:
+            continue
+        radial = (box[:2] - pp) / np.linalg.norm(box[:2] - pp)
+        tangential = np.array([-radial[1], radial[0]])
+        along, across = (uv - box[:2]) @ radial, (uv - box[:2]) @ tangential
+        assert -box[3] / 2 - 1.0 <= along <= 0.0, (box, uv)
+        assert abs(across) <= box[2] / 2 + 1.0, (box, uv)
 
 
 @pytest.mark.parametrize(("name", "index"), CASES)

@@ -7,8 +7,10 @@ import numpy as np
 import pytest
 
 from detector.data.palettes import preset_indices
+from detector.data.readers import FrameAnnotations, read_dataset
+from detector.data.readers import write_dataset as write_annotations
 from detector.data.scenes import build_scene
-from detector.data.synth import SynthConfig
+from detector.data.synth import SynthConfig, render_frame
 from detector.data.synth_writer import write_dataset
 from fisheye import camera_from_dict
 from service.cli import main
@@ -50,6 +52,49 @@ def test_annotations_follow_the_dataset_format(tmp_path: Path) -> None:
         assert len(ann["rotated_box"]) == 4 and len(ann["bbox"]) == 4 and len(ann["location_m"]) == 2
         assert ann["distance_m"] == pytest.approx(np.hypot(*ann["location_m"]), abs=1e-4)
         assert 0 < ann["visible_fraction"] <= 1 and ann["area"] >= 1
+
+
+def _assert_same_frames(a: list[FrameAnnotations], b: list[FrameAnnotations]) -> None:
+    assert len(a) == len(b)
+    for x, y in zip(a, b, strict=True):
+        assert (x.path, x.image_id, x.width, x.height, x.scene_id, x.split, x.camera) == (
+            y.path, y.image_id, y.width, y.height, y.scene_id, y.split, y.camera)
+        for name in ("boxes_cxcywh", "locations_m", "distances_m", "visible_fraction", "crowd_cxcywh",
+                     "bboxes_xywh", "areas_px"):
+            np.testing.assert_array_equal(getattr(x, name), getattr(y, name), err_msg=name)
+
+
+def test_rendered_set_reads_writes_and_reads_back_unchanged(tmp_path: Path) -> None:
+    config = SynthConfig(size=256, kind="indoor", people=(4, 9), images_per_scene=2)
+    write_dataset(tmp_path, 3, seed=3, split="seen", config=config)
+    frames = read_dataset(tmp_path)
+    # The reader gives back what the renderer drew (to the file's rounding).
+    for frame, index in zip(frames, range(3), strict=True):
+        truth = render_frame(3, "seen", index, config)
+        people = [p for p in truth.people if not p.ignore]
+        crowd = [p for p in truth.people if p.ignore]
+        assert frame.camera == truth.camera and frame.scene_id == truth.scene_id
+        assert frame.path == tmp_path / f"{index + 1:06d}.jpg" and frame.path.is_file()
+        def rows(values: list[tuple[float, ...]], width: int) -> np.ndarray:
+            return np.array(values, dtype=np.float64).reshape(-1, width)
+
+        np.testing.assert_allclose(frame.boxes_cxcywh, rows([p.rotated_box for p in people], 4), atol=5e-4)
+        np.testing.assert_allclose(frame.crowd_cxcywh, rows([p.rotated_box for p in crowd], 4), atol=5e-4)
+        np.testing.assert_allclose(frame.locations_m, rows([p.location_m for p in people], 2), atol=5e-6)
+        np.testing.assert_allclose(frame.distances_m, [p.distance_m for p in people], atol=5e-6)
+        np.testing.assert_allclose(frame.visible_fraction, [p.visible_fraction for p in people], atol=5e-5)
+        np.testing.assert_allclose(frame.bboxes_xywh, rows([p.bbox for p in people], 4), atol=5e-4)
+        np.testing.assert_array_equal(frame.areas_px, [p.visible_px for p in people])
+    assert sum(len(f) for f in frames) >= 6 and sum(len(f.crowd_cxcywh) for f in frames) >= 1
+    write_annotations(frames, tmp_path / "again.json")
+    again = read_dataset(tmp_path / "again.json")
+    _assert_same_frames(frames, again)
+    # The silhouette's axis-aligned box is kept, not rebuilt from the rotated box.
+    original = json.loads((tmp_path / "annotations.json").read_text())["annotations"]
+    rewritten = json.loads((tmp_path / "again.json").read_text())["annotations"]
+    people_records = [a for a in original if not a["iscrowd"]]
+    assert [a["bbox"] for a in people_records] == [a["bbox"] for a in rewritten if not a["iscrowd"]]
+    assert [a["area"] for a in people_records] == [a["area"] for a in rewritten if not a["iscrowd"]]
 
 
 def test_seen_and_unseen_scenes_share_no_palette_or_id() -> None:
