@@ -102,3 +102,24 @@ def load_model(path: str | Path) -> tuple[FishLocNet, Checkpoint]:
     """The network of a checkpoint file (eval mode) and the checkpoint itself."""
     checkpoint = load_checkpoint(path)
     return checkpoint.build(path), checkpoint
+
+
+def save_release(source: str | Path, target: str | Path) -> Checkpoint:
+    """Copy a training checkpoint without its training state (optimizer, schedule, RNG): the file
+    to ship and to fine-tune from with `fishloc train --init`, a third of the size."""
+    checkpoint = load_checkpoint(source)
+    release = Checkpoint(checkpoint.config, checkpoint.model_state, checkpoint.info, {})
+    save_checkpoint(target, release)
+    return release
+
+
+if __name__ == "__main__":
+    import sys
+
+    if len(sys.argv) != 3:
+        sys.exit("usage: python -m detector.checkpoint TRAINING_CHECKPOINT RELEASE_CHECKPOINT")
+    try:
+        shipped = save_release(sys.argv[1], sys.argv[2])
+    except CheckpointError as error:
+        sys.exit(f"detector.checkpoint: {error}")
+    print(f"wrote {sys.argv[2]}: {shipped.info.model_version}, trained on {shipped.info.trained_on}")

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from detector.checkpoint import load_checkpoint
+from detector.checkpoint import load_checkpoint, save_release
 from detector.data.dataset import AugmentConfig, DetectionDataset, collate
 from detector.data.readers import read_dataset
 from detector.evaluate import TorchPredictor, evaluate
@@ -90,6 +90,13 @@ def test_train_eval_and_export_commands(toy_dataset: Callable[..., Path], tmp_pa
     assert main(["train", "--data", str(data), "--out", str(out), "--epochs", "2", "--resume",
                  "--model-size", "tiny", "--input-size", "64", "--batch-size", "2", "--quiet"]) == 0
     assert load_checkpoint(out / "last.pt").training_state["epoch"] == 2
+    release = tmp_path / "release.pt"
+    save_release(out / "last.pt", release)
+    assert load_checkpoint(release).training_state == {}
+    assert release.stat().st_size < (out / "last.pt").stat().st_size
+    assert main(["train", "--data", str(data), "--out", str(tmp_path / "ft"), "--epochs", "1", "--init",
+                 str(release), "--batch-size", "2", "--quiet"]) == 0
+    assert load_checkpoint(tmp_path / "ft" / "last.pt").config == load_checkpoint(release).config
     onnx_path = tmp_path / "model.onnx"
     assert main(["export", "--checkpoint", str(out / "last.pt"), "--output", str(onnx_path)]) == 0
     both = toy_dataset(count=2, size=64, seed=2, split="unseen", name="mixed")
