@@ -152,15 +152,33 @@ def test_stream_with_several_cameras_equals_rest(server: LiveServer, frames: lis
 def test_a_bad_frame_mid_stream_gets_an_error_and_the_stream_goes_on(server: LiveServer,
                                                                       frames: list[bytes]) -> None:
     requests = [request("demo", "a-0", frames[0]), request("demo", "a-1", b"not an image at all"),
-                request("nowhere", "a-2", frames[1]), request("demo", "a-3", frames[2], min_score=3.0)]
-    responses: list[pb.DetectResponse] = []
-    for message in [*requests, request("demo", "a-4", frames[3])]:  # one at a time: no drops
-        responses += run(stream(server, [message]))
-    statuses = [(r.frame_id, Status.Name(r.status), r.error_code) for r in responses]
-    assert statuses == [("a-0", "OK", ""), ("a-1", "ERROR", "unsupported_image"),
-                        ("a-2", "ERROR", "camera_not_found"), ("a-3", "ERROR", "invalid_request"),
-                        ("a-4", "OK", "")]
-    mixed = run(stream(server, [*requests, request("demo", "a-4", frames[3])]))
+                request("nowhere", "a-2", frames[1]), request("demo", "a-3", frames[2], min_score=3.0),
+                request("demo", "a-4", frames[3]), request("demo", "a-5", frames[0])]
+
+    async def lockstep() -> tuple[list[pb.DetectResponse], grpc.StatusCode]:
+        """One stream; each frame is written only after the previous one is answered (no drops)."""
+        async with grpc.aio.insecure_channel(target(server)) as channel:
+            call = pb_grpc.LocalizerStub(channel).StreamDetect()
+            answers: list[pb.DetectResponse] = []
+            for message in requests:
+                await call.write(message)
+                answers.append(await call.read())
+            await call.done_writing()
+            assert await call.read() == grpc.aio.EOF
+            return answers, await call.code()
+
+    responses, code = run(lockstep())
+    assert code == grpc.StatusCode.OK
+    statuses = [(r.camera_id, r.frame_id, Status.Name(r.status), r.error_code) for r in responses]
+    assert statuses == [("demo", "a-0", "OK", ""), ("demo", "a-1", "ERROR", "unsupported_image"),
+                        ("nowhere", "a-2", "ERROR", "camera_not_found"),
+                        ("demo", "a-3", "ERROR", "invalid_request"),
+                        ("demo", "a-4", "OK", ""), ("demo", "a-5", "OK", "")]
+    assert all(r.error_message and not r.detections for r in responses if r.status == Status.ERROR)
+    assert all(len(r.detections) == 2 for r in responses if r.status == Status.OK)
+    # Pipelined on one stream, each camera's frames still come back in order, every one answered.
+    requests = requests[:5]
+    mixed = run(stream(server, requests))
     assert [r.frame_id for r in mixed if r.camera_id == "demo"] == ["a-0", "a-1", "a-3", "a-4"]
     assert len(mixed) == 5 and mixed[-1].frame_id in ("a-4", "a-2")
     assert all(r.error_message for r in mixed if r.status != Status.OK)
