@@ -11,6 +11,7 @@ import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
+import cv2
 import grpc
 import httpx
 import numpy as np
@@ -24,6 +25,7 @@ from fisheye import FisheyeCamera, camera_to_dict
 from protos.fishloc.v1 import localizer_pb2 as pb
 from protos.fishloc.v1 import localizer_pb2_grpc as pb_grpc
 from service.config import Settings
+from service.gateway import channel_options
 from service.grpc_convert import response_to_json
 
 Status = pb.DetectResponse.Status
@@ -94,6 +96,35 @@ def test_unary_detect_equals_rest(server: LiveServer, frames: list[bytes]) -> No
     answer = response_to_json(response)
     assert without_timing(answer) == without_timing(rest_answer(server, "demo", frames[0], "f-1"))
     assert len(answer["detections"]) == 2 and answer["timing_ms"]["total"] > 0
+
+
+GRPC_DEFAULT_MAX_MESSAGE = 4 * 1024 * 1024
+
+
+@pytest.fixture(scope="module")
+def large_frame() -> bytes:
+    """A full-resolution 2952x2952 frame of noise at JPEG quality 100: far past gRPC's default
+    4 MiB message limit, within the 32 MiB the server and the gateway allow."""
+    noise = np.random.default_rng(7).integers(0, 256, (2952, 2952, 3), dtype=np.uint8)
+    ok, data = cv2.imencode(".jpg", noise, [cv2.IMWRITE_JPEG_QUALITY, 100])
+    assert ok
+    assert len(data) > 3 * GRPC_DEFAULT_MAX_MESSAGE
+    return bytes(data.tobytes())
+
+
+def test_a_frame_over_the_default_message_limit_is_answered(server: LiveServer, large_frame: bytes) -> None:
+    async def calls() -> tuple[pb.DetectResponse, list[pb.DetectResponse]]:
+        async with grpc.aio.insecure_channel(target(server), options=channel_options()) as channel:
+            stub = pb_grpc.LocalizerStub(channel)
+            unary = await stub.Detect(request("demo", "big-1", large_frame))
+            streamed = [r async for r in stub.StreamDetect(iter([request("demo", "big-2", large_frame)]))]
+            return unary, streamed
+
+    unary, streamed = run(calls())
+    assert [r.frame_id for r in streamed] == ["big-2"]
+    for response in (unary, streamed[0]):
+        assert response.status == Status.OK, response.error_message
+        assert (response.image.width, response.image.height) == (2952, 2952)
 
 
 INVALID = grpc.StatusCode.INVALID_ARGUMENT
