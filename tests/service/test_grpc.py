@@ -361,6 +361,54 @@ def test_shutdown_ends_open_streams_after_answering(settings_for: Callable[..., 
         assert response.status == Status.OK or response.error_code in ("newer_frame", "shutting_down")
 
 
+def test_shutdown_answers_a_unary_detect_in_flight(settings_for: Callable[..., Settings], frames: list[bytes],
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    live = LiveServer(settings_for(grpc_port=0)).start()
+    pipeline = live.state.runner.pipeline
+    entered, gate = threading.Event(), threading.Event()
+    detect = pipeline.detect
+
+    def held_detect(*args: Any, **kwargs: Any) -> Any:
+        entered.set()
+        gate.wait(30)  # a bound, not an assertion
+        return detect(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "detect", held_detect)
+    stopper = threading.Thread(target=live.stop)
+    address = target(live)
+
+    async def refused() -> bool:
+        """Whether a new call is refused (the server has stopped accepting)."""
+        async with grpc.aio.insecure_channel(address) as channel:
+            try:
+                await health_pb2_grpc.HealthStub(channel).Check(health_pb2.HealthCheckRequest(), timeout=1)
+            except grpc.aio.AioRpcError:
+                return True
+            return False
+
+    async def scenario() -> tuple[pb.DetectResponse, bool]:
+        async with grpc.aio.insecure_channel(address) as channel:
+            call = pb_grpc.LocalizerStub(channel).Detect(request("demo", "u-1", frames[0]))
+            assert await asyncio.to_thread(entered.wait, 30)  # the frame is in the pipeline
+            stopper.start()
+            deadline = time.monotonic() + 30
+            while not (stopped := await refused()) and time.monotonic() < deadline:
+                await asyncio.sleep(0.02)
+            gate.set()
+            return await call, stopped
+
+    try:
+        response, stopped = run(scenario())
+    finally:
+        gate.set()
+        if stopper.ident is None:
+            live.stop()
+        else:
+            stopper.join(30)
+    assert stopped  # the answer below came while the server was shutting down
+    assert response.status == Status.OK and response.frame_id == "u-1" and len(response.detections) == 2
+
+
 def test_taken_ports_stop_start_up(server: LiveServer, settings_for: Callable[..., Settings]) -> None:
     assert server.service is not None
     with pytest.raises(RuntimeError, match="bind"):
