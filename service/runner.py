@@ -8,6 +8,7 @@ readiness flag, one set of metrics.
 from __future__ import annotations
 
 import asyncio
+import contextvars
 import logging
 import threading
 from concurrent.futures import ThreadPoolExecutor
@@ -103,11 +104,13 @@ class InferenceRunner:
                            frame_id: str | None, frontend: str) -> DetectionResult:
         """Run a frame that already holds an in-flight slot."""
         loop = asyncio.get_running_loop()
+        # run_in_executor does not carry context variables into the pool (asyncio.to_thread does):
+        # without this, the pipeline's log lines would lose the request id.
+        context = contextvars.copy_context()
         try:
-            result = await loop.run_in_executor(
-                self._executor,
-                lambda: self.pipeline.detect(data, camera, min_score=min_score, frame_id=frame_id),
-            )
+            result = await loop.run_in_executor(self._executor, lambda: context.run(
+                self.pipeline.detect, data, camera, min_score=min_score, frame_id=frame_id,
+            ))
         except FrameError as error:
             self.metrics.frame_errors.labels(code=error.code).inc()
             raise
