@@ -4,6 +4,7 @@ webcam (OpenCV), each yielding JPEG-encoded frames with an id and a capture time
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -57,62 +58,112 @@ class FolderSource:
                 data = encode_jpeg(image)
             yield SourceFrame(file.name, time.time_ns(), data)
 
+    def stop(self) -> None:
+        pass
+
     def close(self) -> None:
         pass
 
 
-class CaptureSource:
-    """An OpenCV VideoCapture: a video file, an RTSP/HTTP URL or a webcam index. A live source that
-    stops delivering is reopened (with backoff) instead of ending."""
+@dataclass(frozen=True)
+class ReopenPolicy:
+    """How a live source that cannot be opened, or stops delivering, is opened again: waits of
+    `first_backoff_s` doubling up to `max_backoff_s`, at most `max_attempts` times in a row
+    (None: until the gateway stops)."""
 
-    def __init__(self, target: str | int, live: bool, max_backoff_s: float = 30.0) -> None:
+    first_backoff_s: float = 0.5
+    max_backoff_s: float = 30.0
+    max_attempts: int | None = None
+
+    def __post_init__(self) -> None:
+        if not 0 < self.first_backoff_s <= self.max_backoff_s:
+            raise ValueError(f"invalid backoff {self}")
+        if self.max_attempts is not None and self.max_attempts < 0:
+            raise ValueError(f"max_attempts must be >= 0, got {self.max_attempts}")
+
+
+class CaptureSource:
+    """An OpenCV VideoCapture: a video file, an RTSP/HTTP URL or a webcam index.
+
+    A video file that cannot be opened is a ValueError. A live source (URL or webcam) that cannot be
+    opened yet, or that stops delivering, is opened again with backoff (`ReopenPolicy`) instead of
+    ending: cameras reboot and networks drop.
+    """
+
+    def __init__(self, target: str | int, live: bool, reopen: ReopenPolicy | None = None) -> None:
         self.target = target
         self.live = live
-        self.max_backoff_s = max_backoff_s
-        self.capture = self._open()
-        fps = float(self.capture.get(cv2.CAP_PROP_FPS) or 0.0)
-        self.native_fps = fps if fps > 0 and not live else None
-
-    def _open(self) -> cv2.VideoCapture:
-        capture = cv2.VideoCapture(self.target)
-        if not capture.isOpened():
+        self.reopen = reopen or ReopenPolicy()
+        self._stopped = threading.Event()
+        self._backoff_s = self.reopen.first_backoff_s
+        self.capture: cv2.VideoCapture | None = self._try_open()
+        if self.capture is None and not live:
             raise ValueError(f"cannot open video source {self.target!r}")
-        return capture
+        fps = float(self.capture.get(cv2.CAP_PROP_FPS) or 0.0) if self.capture is not None else 0.0
+        self.native_fps = fps if fps > 0 and not live else None
+        if self.capture is None:
+            log.warning("cannot open video source %r yet; retrying", self.target)
+
+    def _try_open(self) -> cv2.VideoCapture | None:
+        capture = cv2.VideoCapture(self.target)
+        if capture.isOpened():
+            return capture
+        capture.release()
+        return None
+
+    def _open_again(self) -> cv2.VideoCapture | None:
+        """Wait and open, with growing waits; None once stopped or out of attempts."""
+        attempts = 0
+        while self.reopen.max_attempts is None or attempts < self.reopen.max_attempts:
+            log.warning("video source %r unavailable; opening it again in %.1f s", self.target,
+                        self._backoff_s)
+            if self._stopped.wait(self._backoff_s):
+                return None
+            self._backoff_s = min(self._backoff_s * 2, self.reopen.max_backoff_s)
+            attempts += 1
+            capture = self._try_open()
+            if capture is not None:
+                return capture
+        log.warning("giving up on video source %r after %d attempts", self.target, attempts)
+        return None
 
     def frames(self) -> Iterator[SourceFrame]:
         index = 0
-        backoff = 0.5
-        while True:
+        while not self._stopped.is_set():
+            if self.capture is None:
+                self.capture = self._open_again()
+                if self.capture is None:
+                    return
             ok, image = self.capture.read()
             if not ok:
                 if not self.live:
                     return
-                log.warning("video source %r stopped; reopening in %.1f s", self.target, backoff)
-                time.sleep(backoff)
-                backoff = min(backoff * 2, self.max_backoff_s)
                 self.capture.release()
-                try:
-                    self.capture = self._open()
-                except ValueError as error:
-                    log.warning("%s", error)
+                self.capture = None
                 continue
-            backoff = 0.5
+            self._backoff_s = self.reopen.first_backoff_s
             yield SourceFrame(str(index), time.time_ns(), encode_jpeg(image))
             index += 1
 
+    def stop(self) -> None:
+        """Make `frames` end soon, from any thread (a wait between attempts ends at once)."""
+        self._stopped.set()
+
     def close(self) -> None:
-        self.capture.release()
+        if self.capture is not None:
+            self.capture.release()
 
 
 FrameSource = FolderSource | CaptureSource
 
 
-def open_source(source: str) -> FrameSource:
-    """A folder, a webcam index ("0"), a URL (rtsp://, http://...) or a video file."""
+def open_source(source: str, reopen: ReopenPolicy | None = None) -> FrameSource:
+    """A folder, a webcam index ("0"), a URL (rtsp://, http://...) or a video file; `reopen` is
+    how a live source (webcam or URL) is opened again."""
     if source.isdigit():
-        return CaptureSource(int(source), live=True)
+        return CaptureSource(int(source), live=True, reopen=reopen)
     if "://" in source:
-        return CaptureSource(source, live=True)
+        return CaptureSource(source, live=True, reopen=reopen)
     path = Path(source)
     if path.is_dir():
         return FolderSource(path)

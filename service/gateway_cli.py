@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 from typing import TextIO
 
-from service.frame_sources import open_source
+from service.frame_sources import ReopenPolicy, open_source
 from service.gateway import Gateway, GatewayConfig
 
 
@@ -29,14 +29,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-score", type=float, default=None,
                         help="score threshold (default: the model's)")
     parser.add_argument("--out", type=Path, default=None, help="write the JSON lines here instead of stdout")
-    parser.add_argument("--max-backoff", type=float, default=30.0, help="longest wait between reconnects (s)")
+    parser.add_argument("--max-backoff", type=float, default=30.0,
+                        help="longest wait between reconnects to the server, and between attempts to "
+                             "open a live source (URL, webcam) again (s)")
 
 
 def run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s",
                         stream=sys.stderr)
     try:
-        source = open_source(args.source)
+        reopen = ReopenPolicy(first_backoff_s=min(0.5, args.max_backoff), max_backoff_s=args.max_backoff)
+        source = open_source(args.source, reopen)
     except ValueError as error:
         print(f"fishloc gateway: {error}", file=sys.stderr)
         return 2
@@ -49,8 +52,15 @@ def run(args: argparse.Namespace) -> int:
         out.flush()
 
     gateway = Gateway(config, source, write_line)
+
+    async def stream() -> None:
+        try:
+            await gateway.run()
+        finally:
+            source.stop()  # on Ctrl-C, a wait between attempts to open the source ends at once
+
     try:
-        asyncio.run(gateway.run())
+        asyncio.run(stream())
     except KeyboardInterrupt:
         pass
     finally:

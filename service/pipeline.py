@@ -9,6 +9,7 @@ the `fisheye` geometry.
 from __future__ import annotations
 
 import dataclasses
+import logging
 import time
 from dataclasses import dataclass
 
@@ -21,6 +22,8 @@ from service.onnx_model import ModelInfo, OnnxModel
 from service.result import DetectionResult, Detections
 
 FloatArray = NDArray[np.float64]
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -119,6 +122,8 @@ class Pipeline:
             model_name=self.info.name, model_version=self.info.version,
             detections=detections, timing_ms=timing_ms,
         )
+        log.debug("frame %s of %s: %d detections in %.1f ms", frame_id, camera.id, len(detections.scores),
+                  timing_ms["total"], extra={"camera_id": camera.id, "frame_id": frame_id})
         return result, frame
 
     def _postprocess(self, boxes_input: NDArray[np.float32], scores: NDArray[np.float32], threshold: float,

@@ -8,8 +8,11 @@ readiness flag, one set of metrics.
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import contextvars
 import logging
 import threading
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -87,27 +90,36 @@ class InferenceRunner:
             self._in_flight -= 1
         self.metrics.in_flight.dec()
 
-    async def detect(self, data: bytes, camera: FisheyeCamera, *, min_score: float | None,
-                     frame_id: str | None, frontend: str) -> DetectionResult:
-        """Admit, run the pipeline in the pool, record metrics. Raises OverloadedError or FrameError."""
+    @contextlib.contextmanager
+    def admitted(self, frontend: str) -> Iterator[None]:
+        """Hold an in-flight slot for the block, or raise OverloadedError at once (a rejection of
+        `frontend` in the metrics)."""
         if not self.try_admit():
             self.metrics.rejected.labels(frontend=frontend).inc()
             raise OverloadedError(self.config.max_in_flight, self.config.retry_after_s)
         try:
-            return await self.run_admitted(data, camera, min_score=min_score, frame_id=frame_id,
-                                           frontend=frontend)
+            yield
         finally:
             self.release()
+
+    async def detect(self, data: bytes, camera: FisheyeCamera, *, min_score: float | None,
+                     frame_id: str | None, frontend: str) -> DetectionResult:
+        """Admit, run the pipeline in the pool, record metrics. Raises OverloadedError or FrameError."""
+        with self.admitted(frontend):
+            return await self.run_admitted(data, camera, min_score=min_score, frame_id=frame_id,
+                                           frontend=frontend)
 
     async def run_admitted(self, data: bytes, camera: FisheyeCamera, *, min_score: float | None,
                            frame_id: str | None, frontend: str) -> DetectionResult:
         """Run a frame that already holds an in-flight slot."""
         loop = asyncio.get_running_loop()
+        # run_in_executor does not carry context variables into the pool (asyncio.to_thread does):
+        # without this, the pipeline's log lines would lose the request id.
+        context = contextvars.copy_context()
         try:
-            result = await loop.run_in_executor(
-                self._executor,
-                lambda: self.pipeline.detect(data, camera, min_score=min_score, frame_id=frame_id),
-            )
+            result = await loop.run_in_executor(self._executor, lambda: context.run(
+                self.pipeline.detect, data, camera, min_score=min_score, frame_id=frame_id,
+            ))
         except FrameError as error:
             self.metrics.frame_errors.labels(code=error.code).inc()
             raise

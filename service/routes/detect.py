@@ -16,7 +16,7 @@ from service.dependencies import DetectAccess, ServiceState, State
 from service.errors import ApiError, frame_error
 from service.frame_decode import FrameError
 from service.render import render_jpeg
-from service.request_body import BodyLimits, read_body
+from service.request_body import CLOSE, BodyLimits, read_body
 from service.result import result_to_json
 from service.routes.cameras import not_found
 from service.runner import OverloadedError
@@ -54,8 +54,8 @@ async def _image_from_multipart(request: Request, body: bytes) -> bytes:
         await form.close()
 
 
-async def frame_bytes(request: Request, state: ServiceState) -> bytes:
-    """The encoded frame of a detect request: raw JPEG/PNG body or multipart field `image`."""
+def frame_media_type(request: Request) -> str:
+    """The media type of a detect request's body, or ApiError 415 when it is not one we take."""
     media_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
     if media_type not in RAW_TYPES and media_type != "multipart/form-data":
         raise ApiError(
@@ -63,6 +63,11 @@ async def frame_bytes(request: Request, state: ServiceState) -> bytes:
             f"Content-Type {media_type or '(none)'} is not accepted; send image/jpeg, image/png or "
             "multipart/form-data with a field 'image'",
         )
+    return media_type
+
+
+async def frame_bytes(request: Request, media_type: str, state: ServiceState) -> bytes:
+    """The encoded frame of a detect request: raw JPEG/PNG body or multipart field `image`."""
     body = await read_body(request, BodyLimits(state.settings.max_body_bytes, state.settings.body_timeout_s))
     if media_type == "multipart/form-data":
         body = await _image_from_multipart(request, body)
@@ -101,12 +106,18 @@ async def detect(
     camera = await run_in_threadpool(state.registry.get, camera_id)
     if camera is None:
         raise not_found(camera_id)
-    data = await frame_bytes(request, state)
+    media_type = frame_media_type(request)
+    runner = state.runner
     try:
-        result = await state.runner.detect(data, camera, min_score=min_score, frame_id=frame_id,
-                                           frontend="rest")
+        # Admitted before the body is read: under overload, bodies are refused unread, so at most
+        # the in-flight limit of them are held in memory at once.
+        with runner.admitted("rest"):
+            data = await frame_bytes(request, media_type, state)
+            result = await runner.run_admitted(data, camera, min_score=min_score, frame_id=frame_id,
+                                               frontend="rest")
     except OverloadedError as error:
-        retry = {"Retry-After": str(error.retry_after_s)}
+        # The body is left unread; closing the connection stops the server reading and discarding it.
+        retry = {"Retry-After": str(error.retry_after_s)} | CLOSE
         raise ApiError(503, "overloaded", str(error), headers=retry) from None
     except FrameError as error:
         raise frame_error(error) from None

@@ -11,6 +11,7 @@ import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
+import cv2
 import grpc
 import httpx
 import numpy as np
@@ -24,6 +25,7 @@ from fisheye import FisheyeCamera, camera_to_dict
 from protos.fishloc.v1 import localizer_pb2 as pb
 from protos.fishloc.v1 import localizer_pb2_grpc as pb_grpc
 from service.config import Settings
+from service.gateway import channel_options
 from service.grpc_convert import response_to_json
 
 Status = pb.DetectResponse.Status
@@ -96,6 +98,35 @@ def test_unary_detect_equals_rest(server: LiveServer, frames: list[bytes]) -> No
     assert len(answer["detections"]) == 2 and answer["timing_ms"]["total"] > 0
 
 
+GRPC_DEFAULT_MAX_MESSAGE = 4 * 1024 * 1024
+
+
+@pytest.fixture(scope="module")
+def large_frame() -> bytes:
+    """A full-resolution 2952x2952 frame of noise at JPEG quality 100: far past gRPC's default
+    4 MiB message limit, within the 32 MiB the server and the gateway allow."""
+    noise = np.random.default_rng(7).integers(0, 256, (2952, 2952, 3), dtype=np.uint8)
+    ok, data = cv2.imencode(".jpg", noise, [cv2.IMWRITE_JPEG_QUALITY, 100])
+    assert ok
+    assert len(data) > 3 * GRPC_DEFAULT_MAX_MESSAGE
+    return bytes(data.tobytes())
+
+
+def test_a_frame_over_the_default_message_limit_is_answered(server: LiveServer, large_frame: bytes) -> None:
+    async def calls() -> tuple[pb.DetectResponse, list[pb.DetectResponse]]:
+        async with grpc.aio.insecure_channel(target(server), options=channel_options()) as channel:
+            stub = pb_grpc.LocalizerStub(channel)
+            unary = await stub.Detect(request("demo", "big-1", large_frame))
+            streamed = [r async for r in stub.StreamDetect(iter([request("demo", "big-2", large_frame)]))]
+            return unary, streamed
+
+    unary, streamed = run(calls())
+    assert [r.frame_id for r in streamed] == ["big-2"]
+    for response in (unary, streamed[0]):
+        assert response.status == Status.OK, response.error_message
+        assert (response.image.width, response.image.height) == (2952, 2952)
+
+
 INVALID = grpc.StatusCode.INVALID_ARGUMENT
 
 
@@ -152,15 +183,33 @@ def test_stream_with_several_cameras_equals_rest(server: LiveServer, frames: lis
 def test_a_bad_frame_mid_stream_gets_an_error_and_the_stream_goes_on(server: LiveServer,
                                                                       frames: list[bytes]) -> None:
     requests = [request("demo", "a-0", frames[0]), request("demo", "a-1", b"not an image at all"),
-                request("nowhere", "a-2", frames[1]), request("demo", "a-3", frames[2], min_score=3.0)]
-    responses: list[pb.DetectResponse] = []
-    for message in [*requests, request("demo", "a-4", frames[3])]:  # one at a time: no drops
-        responses += run(stream(server, [message]))
-    statuses = [(r.frame_id, Status.Name(r.status), r.error_code) for r in responses]
-    assert statuses == [("a-0", "OK", ""), ("a-1", "ERROR", "unsupported_image"),
-                        ("a-2", "ERROR", "camera_not_found"), ("a-3", "ERROR", "invalid_request"),
-                        ("a-4", "OK", "")]
-    mixed = run(stream(server, [*requests, request("demo", "a-4", frames[3])]))
+                request("nowhere", "a-2", frames[1]), request("demo", "a-3", frames[2], min_score=3.0),
+                request("demo", "a-4", frames[3]), request("demo", "a-5", frames[0])]
+
+    async def lockstep() -> tuple[list[pb.DetectResponse], grpc.StatusCode]:
+        """One stream; each frame is written only after the previous one is answered (no drops)."""
+        async with grpc.aio.insecure_channel(target(server)) as channel:
+            call = pb_grpc.LocalizerStub(channel).StreamDetect()
+            answers: list[pb.DetectResponse] = []
+            for message in requests:
+                await call.write(message)
+                answers.append(await call.read())
+            await call.done_writing()
+            assert await call.read() == grpc.aio.EOF
+            return answers, await call.code()
+
+    responses, code = run(lockstep())
+    assert code == grpc.StatusCode.OK
+    statuses = [(r.camera_id, r.frame_id, Status.Name(r.status), r.error_code) for r in responses]
+    assert statuses == [("demo", "a-0", "OK", ""), ("demo", "a-1", "ERROR", "unsupported_image"),
+                        ("nowhere", "a-2", "ERROR", "camera_not_found"),
+                        ("demo", "a-3", "ERROR", "invalid_request"),
+                        ("demo", "a-4", "OK", ""), ("demo", "a-5", "OK", "")]
+    assert all(r.error_message and not r.detections for r in responses if r.status == Status.ERROR)
+    assert all(len(r.detections) == 2 for r in responses if r.status == Status.OK)
+    # Pipelined on one stream, each camera's frames still come back in order, every one answered.
+    requests = requests[:5]
+    mixed = run(stream(server, requests))
     assert [r.frame_id for r in mixed if r.camera_id == "demo"] == ["a-0", "a-1", "a-3", "a-4"]
     assert len(mixed) == 5 and mixed[-1].frame_id in ("a-4", "a-2")
     assert all(r.error_message for r in mixed if r.status != Status.OK)
@@ -310,6 +359,54 @@ def test_shutdown_ends_open_streams_after_answering(settings_for: Callable[..., 
     assert ids == [f"s-{i}" for i in range(len(ids))] and len(ids) >= 1
     for response in responses:
         assert response.status == Status.OK or response.error_code in ("newer_frame", "shutting_down")
+
+
+def test_shutdown_answers_a_unary_detect_in_flight(settings_for: Callable[..., Settings], frames: list[bytes],
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    live = LiveServer(settings_for(grpc_port=0)).start()
+    pipeline = live.state.runner.pipeline
+    entered, gate = threading.Event(), threading.Event()
+    detect = pipeline.detect
+
+    def held_detect(*args: Any, **kwargs: Any) -> Any:
+        entered.set()
+        gate.wait(30)  # a bound, not an assertion
+        return detect(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "detect", held_detect)
+    stopper = threading.Thread(target=live.stop)
+    address = target(live)
+
+    async def refused() -> bool:
+        """Whether a new call is refused (the server has stopped accepting)."""
+        async with grpc.aio.insecure_channel(address) as channel:
+            try:
+                await health_pb2_grpc.HealthStub(channel).Check(health_pb2.HealthCheckRequest(), timeout=1)
+            except grpc.aio.AioRpcError:
+                return True
+            return False
+
+    async def scenario() -> tuple[pb.DetectResponse, bool]:
+        async with grpc.aio.insecure_channel(address) as channel:
+            call = pb_grpc.LocalizerStub(channel).Detect(request("demo", "u-1", frames[0]))
+            assert await asyncio.to_thread(entered.wait, 30)  # the frame is in the pipeline
+            stopper.start()
+            deadline = time.monotonic() + 30
+            while not (stopped := await refused()) and time.monotonic() < deadline:
+                await asyncio.sleep(0.02)
+            gate.set()
+            return await call, stopped
+
+    try:
+        response, stopped = run(scenario())
+    finally:
+        gate.set()
+        if stopper.ident is None:
+            live.stop()
+        else:
+            stopper.join(30)
+    assert stopped  # the answer below came while the server was shutting down
+    assert response.status == Status.OK and response.frame_id == "u-1" and len(response.detections) == 2
 
 
 def test_taken_ports_stop_start_up(server: LiveServer, settings_for: Callable[..., Settings]) -> None:

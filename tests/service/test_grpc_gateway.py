@@ -22,7 +22,7 @@ from service_live_server import LiveServer
 
 from fisheye import FisheyeCamera
 from service.config import Settings
-from service.frame_sources import FolderSource, open_source
+from service.frame_sources import FolderSource, SourceFrame, open_source
 from service.gateway import Gateway, GatewayConfig
 
 SPOTS = [(1.0, 0.5), (-1.5, 2.0), (0.3, -2.2), (2.5, 1.0), (-0.8, -0.9)]
@@ -134,6 +134,72 @@ def test_gateway_reconnects_to_a_server_that_starts_late(settings_for: Callable[
     counts = outcome["counts"]
     assert counts.sent == counts.answered + counts.dropped + counts.lost
     assert counts.answered >= 1 and len(lines) == counts.answered + counts.dropped
+
+
+class PausingFolder(FolderSource):
+    """A folder whose frames stop coming after `pause_after` of them, until `resume` is set."""
+
+    def __init__(self, folder: Path, pause_after: int) -> None:
+        super().__init__(folder)
+        self.pause_after = pause_after
+        self.paused = threading.Event()
+        self.resume = threading.Event()
+
+    def frames(self) -> Iterator[SourceFrame]:
+        for index, frame in enumerate(super().frames()):
+            if index == self.pause_after:
+                self.paused.set()
+                self.resume.wait(60)  # a bound, not an assertion
+            yield frame
+
+
+def _wait_for(condition: Callable[[], bool], timeout_s: float = 30) -> bool:
+    deadline = time.monotonic() + timeout_s  # a bound, not an assertion
+    while not condition() and time.monotonic() < deadline:
+        time.sleep(0.02)
+    return condition()
+
+
+def test_gateway_goes_on_after_the_server_restarts_mid_stream(settings_for: Callable[..., Settings],
+                                                              demo_camera: FisheyeCamera,
+                                                              tmp_path: Path) -> None:
+    for index in range(10):
+        frame = person_frame(demo_camera, SPOTS[index % len(SPOTS)], (512, 512), disk_radius_px=12)
+        (tmp_path / f"{index:02d}.jpg").write_bytes(encode(frame.bgr))
+    port = _free_port()
+    lines: list[dict[str, Any]] = []
+    config = GatewayConfig(server=f"127.0.0.1:{port}", camera_id="demo", fps=0, max_backoff_s=0.5,
+                           max_reconnects=200)
+    source = PausingFolder(tmp_path, pause_after=4)
+    gateway = Gateway(config, source, lambda line: lines.append(json.loads(line)))
+    outcome: dict[str, Any] = {}
+
+    def run_gateway() -> None:
+        try:
+            outcome["counts"] = asyncio.run(gateway.run())
+        except BaseException as error:
+            outcome["error"] = error
+
+    thread = threading.Thread(target=run_gateway)
+    first = LiveServer(settings_for(grpc_port=port)).start()
+    try:
+        thread.start()
+        answered = _wait_for(lambda: source.paused.is_set() and len(lines) == 4)
+    finally:
+        first.stop()  # mid-stream: the gateway's stream is open, its source has more frames
+    source.resume.set()
+    assert answered and gateway.counts.reconnects == 0
+    assert _wait_for(lambda: gateway.counts.reconnects >= 1 or not thread.is_alive())
+    with LiveServer(settings_for(grpc_port=port)):  # the same port, the same registry
+        thread.join(60)
+    assert not thread.is_alive() and "error" not in outcome, outcome.get("error")
+    counts = outcome["counts"]
+    assert counts.sent == 10 == counts.answered + counts.dropped + counts.lost
+    assert counts.reconnects >= 1 and len(lines) == counts.answered + counts.dropped
+    before = [line["frame_id"] for line in lines[:4]]
+    after = [line["frame_id"] for line in lines[4:] if line["status"] == "OK"]
+    assert before == ["00.jpg", "01.jpg", "02.jpg", "03.jpg"] and after  # the new server answered
+    assert all(line["frame_id"] >= "04.jpg" for line in lines[4:])
 
 
 def test_open_source_kinds(tmp_path: Path) -> None:

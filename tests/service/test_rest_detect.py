@@ -6,6 +6,7 @@ stands on the demo camera's floor must come back at that floor position.
 
 from __future__ import annotations
 
+import socket
 from collections.abc import Callable, Iterator
 
 import cv2
@@ -152,6 +153,7 @@ BROKEN_FORM = {"content-type": "multipart/form-data; boundary=y"}
 def test_error_statuses(server: LiveServer, frame: tuple[bytes, tuple[float, float]], status: int,
                         code: str, call: ErrorCase) -> None:
     assert error_of(call(server, frame[0]), status) == code
+    assert server.state.runner.in_flight == 0  # a refused frame gives its in-flight slot back
 
 
 def test_overload_answers_503_with_retry_after(tmp_path: object, settings_for: Callable[..., Settings],
@@ -167,6 +169,35 @@ def test_overload_answers_503_with_retry_after(tmp_path: object, settings_for: C
         assert httpx.post(detect_url(live), content=frame[0], headers=JPEG).status_code == 200
         metrics = httpx.get(f"{live.url}/metrics").text
         assert 'fishloc_overload_rejections_total{frontend="rest"} 1.0' in metrics
+
+
+def test_overload_is_answered_before_the_body_is_read(settings_for: Callable[..., Settings],
+                                                     frame: tuple[bytes, tuple[float, float]]) -> None:
+    """A frame refused for overload is refused unread: the 503 comes while most of its body has not
+    even been sent (reading it first would end in 408 once the body deadline passed), and the
+    connection is closed so the rest is not read either."""
+    with LiveServer(settings_for(max_in_flight=2, retry_after_s=3, body_timeout_s=5)) as live:
+        runner = live.state.runner
+        assert runner.try_admit() and runner.try_admit()  # every slot held, as by long frames
+        try:
+            port = int(live.url.rsplit(":", 1)[1])
+            with socket.create_connection(("127.0.0.1", port), timeout=30) as client:  # a bound
+                client.sendall(b"POST /v1/cameras/demo/detect HTTP/1.1\r\nhost: x\r\n"
+                               b"content-type: image/jpeg\r\ncontent-length: 20000000\r\n\r\n"
+                               + frame[0][:100])
+                answer = b""
+                while chunk := client.recv(65536):  # until the server closes the connection
+                    answer += chunk
+            head, _, body = answer.partition(b"\r\n\r\n")
+            lines = head.decode("latin-1").lower().split("\r\n")
+            assert lines[0].startswith("http/1.1 503") and b'"overloaded"' in body
+            assert "retry-after: 3" in lines and "connection: close" in lines
+            assert runner.in_flight == 2  # nothing taken, nothing given back twice
+        finally:
+            runner.release()
+            runner.release()
+        assert httpx.post(detect_url(live), content=frame[0], headers=JPEG).status_code == 200
+        assert runner.in_flight == 0
 
 
 def test_not_ready_answers_503(settings_for: Callable[..., Settings],

@@ -142,3 +142,42 @@ def test_fishloc_serve_end_to_end(tmp_path: Path, double_model_path: Path,
         _, stderr = process.communicate(timeout=60)
     assert process.returncode == 0, stderr
     assert '"message": "stopped"' in stderr and "POST /v1/cameras/demo/detect 200" in stderr
+
+
+def test_pipeline_log_lines_carry_the_request_id(tmp_path: Path, double_model_path: Path,
+                                                 demo_camera: FisheyeCamera) -> None:
+    """The pipeline runs in a worker thread; its log lines still name the request they serve."""
+    import json
+    import os
+    import signal
+    import time
+
+    http_port = _free_port()
+    process = subprocess.Popen(
+        [sys.executable, "-m", "service.cli", "serve", "--model", str(double_model_path), "--http-port",
+         str(http_port), "--grpc-port", "-1", "--database", str(tmp_path / "cameras.db")],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        env=os.environ | {"FISHLOC_LOG_LEVEL": "debug", "FISHLOC_LOG_JSON": "true"},
+    )
+    try:
+        url = f"http://127.0.0.1:{http_port}"
+        deadline = time.monotonic() + 60  # a bound, not an assertion
+        while time.monotonic() < deadline:
+            try:
+                if httpx.get(f"{url}/readyz").status_code == 200:
+                    break
+            except httpx.TransportError:
+                pass
+            time.sleep(0.05)
+        truth = person_frame(demo_camera, (0.9, -1.3), (1024, 1024), disk_radius_px=20)
+        answer = httpx.post(f"{url}/v1/cameras/demo/detect", content=encode(truth.bgr),
+                            headers=JPEG | {"X-Request-ID": "trace-7"}, params={"frame_id": "f-7"})
+        assert answer.status_code == 200
+    finally:
+        process.send_signal(signal.SIGTERM)
+        _, stderr = process.communicate(timeout=60)
+    lines = [json.loads(line) for line in stderr.splitlines() if line.startswith("{")]
+    frame_lines = [line for line in lines if line["logger"] == "service.pipeline"]
+    assert [(line["frame_id"], line.get("request_id")) for line in frame_lines] == [("f-7", "trace-7")]
+    access = [line for line in lines if line["logger"] == "fishloc.access" and line["method"] == "POST"]
+    assert [line["request_id"] for line in access] == ["trace-7"]
