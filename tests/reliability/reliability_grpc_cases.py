@@ -203,7 +203,23 @@ GRPC_CAMERA_CASES: list[GrpcCameraCase] = [
 
 # ----- non-request scenarios of gRPC (the tests assert these codes)
 
-GRPC_SCENARIOS: list[Scenario] = []
+T = "tests/reliability/"
+
+GRPC_SCENARIOS: list[Scenario] = [
+    Scenario("tls_grpc", "access", "FISHLOC_TLS_CERT/KEY set to a self-signed certificate",
+             "gRPC over TLS: Detect OK and health SERVING for a client trusting that certificate; a "
+             "client with the system's roots, and a plain-text client, get UNAVAILABLE",
+             T + "test_reliability_grpc_access.py::test_grpc_over_tls"),
+    Scenario("detect_token_grpc", "access", "FISHLOC_DETECT_TOKEN set: Detect and StreamDetect without, "
+             "with a wrong, or with a non-Bearer `authorization` metadata",
+             "UNAUTHENTICATED; the detect token and the API token both detect (OK); without "
+             "FISHLOC_DETECT_TOKEN detection is open",
+             T + "test_reliability_grpc_access.py::test_grpc_detect_token"),
+    Scenario("registry_token_grpc", "access", "FISHLOC_API_TOKEN set: PutCamera and DeleteCamera without "
+             "a token, with a wrong one, or with the detect token",
+             "UNAUTHENTICATED and the registry unchanged; with the API token OK; reads open",
+             T + "test_reliability_grpc_access.py::test_grpc_registry_writes_need_the_api_token"),
+]
 
 
 def frame_case_test_id(case: GrpcFrameCase) -> str:

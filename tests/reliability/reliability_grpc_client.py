@@ -66,6 +66,20 @@ def stream_all(target: str, requests: list[pb.DetectRequest], metadata: Metadata
     return localizer(target, use, credentials)
 
 
+def stream_refusal(target: str, metadata: Metadata = (),
+                   credentials: grpc.ChannelCredentials | None = None) -> grpc.StatusCode:
+    """The status of a StreamDetect call that sends nothing: what the server answers from the call's
+    metadata alone. (A grpcio asyncio client that writes after the server ended a stream may report
+    INTERNAL "Internal error from Core" instead of the server's status, grpc/grpc#36066.)"""
+
+    async def use(stub: pb_grpc.LocalizerStub) -> grpc.StatusCode:
+        call = stub.StreamDetect(metadata=metadata, timeout=10)  # an open stream would wait forever
+        code: grpc.StatusCode = await call.code()
+        return code
+
+    return localizer(target, use, credentials)
+
+
 def assert_person(response: pb.DetectResponse) -> None:
     """An OK answer whose best detection stands at the person's floor position."""
     assert response.status == Status.OK, (Status.Name(response.status), response.error_message)

@@ -106,9 +106,12 @@ def test_grpc_frame_case(server: LiveServer, samples: Samples, case: GrpcFrameCa
         assert_refused(refused(target, detect(request)), expect)
     # The same frame on a stream, then a good frame of the demo camera on the same stream.
     if expect.ends_stream:
+        # Alone on its stream: a frame written after the end could hide the status (see
+        # stream_refusal); a new stream is served.
         with pytest.raises(grpc.aio.AioRpcError) as caught:
-            stream_all(target, [request, good_request(samples, "good-after")])
+            stream_all(target, [request])
         assert_refused(caught.value, expect)
+        assert_person(stream_all(target, [good_request(samples, "good-after")])[0])
     else:
         answers = {answer.frame_id: answer
                    for answer in stream_all(target, [request, good_request(samples, "good-after")])}
