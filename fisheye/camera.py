@@ -65,7 +65,7 @@ class FisheyeCamera(BaseModel):
     @field_validator("id")
     @classmethod
     def _check_id(cls, value: str) -> str:
-        if not _CAMERA_ID_RE.match(value):
+        if not _CAMERA_ID_RE.fullmatch(value):  # match() would let a trailing newline through
             raise ValueError(
                 "camera id must be 1-64 characters of letters, digits, '.', '_' or '-', "
                 "starting with a letter or digit"

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import re
 from collections.abc import AsyncIterator
 from typing import Any, NoReturn
 
@@ -16,6 +17,7 @@ from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
 from fisheye import CalibrationError, FisheyeCamera
+from fisheye.camera import CAMERA_ID_PATTERN
 from protos.fishloc.v1 import localizer_pb2 as pb
 from protos.fishloc.v1 import localizer_pb2_grpc as pb_grpc
 from service.dependencies import ServiceState, bearer_matches
@@ -37,6 +39,8 @@ log = logging.getLogger(__name__)
 SERVICE_NAME = pb.DESCRIPTOR.services_by_name["Localizer"].full_name
 Status = pb.DetectResponse.Status
 _ADMIT_POLL_S = 0.005
+MAX_FRAME_ID_CHARS = 128  # as REST's frame_id query parameter
+_SHOWN_ID_CHARS = 64
 
 
 async def _abort(context: grpc.aio.ServicerContext, code: grpc.StatusCode, message: str) -> NoReturn:
@@ -57,6 +61,30 @@ class _FrameRefusedError(Exception):
         super().__init__(message)
         self.code = code
         self.message = message
+
+
+def _shown(camera_id: str) -> str:
+    """An id as an error message may quote it: a 10 kB id in a status's details would pass the
+    client's metadata limit, and the client would see RESOURCE_EXHAUSTED instead of the error."""
+    if len(camera_id) <= _SHOWN_ID_CHARS:
+        return repr(camera_id)
+    return f"{camera_id[:_SHOWN_ID_CHARS]!r}... ({len(camera_id)} characters)"
+
+
+def check_camera_id(camera_id: str) -> None:
+    """Refuse an id no camera can have, as REST's path pattern does (`invalid_request`)."""
+    if re.fullmatch(CAMERA_ID_PATTERN, camera_id) is None:
+        raise _FrameRefusedError(
+            "invalid_request",
+            f"camera_id {_shown(camera_id)} must be 1-64 characters of letters, digits, '.', '_' or '-', "
+            "starting with a letter or digit",
+        )
+
+
+def check_frame_id(frame_id: str) -> None:
+    if len(frame_id) > MAX_FRAME_ID_CHARS:
+        raise _FrameRefusedError("invalid_request", f"frame_id must be at most {MAX_FRAME_ID_CHARS} "
+                                                    f"characters, got {len(frame_id)}")
 
 
 def server_options(max_message_bytes: int) -> list[tuple[str, Any]]:
@@ -82,7 +110,11 @@ class LocalizerServicer:
 
     # ----- detection
 
-    async def _camera(self, camera_id: str) -> FisheyeCamera:
+    async def _camera(self, request: pb.DetectRequest) -> FisheyeCamera:
+        """The request's camera, once its camera_id and frame_id are known to be well formed."""
+        camera_id = request.camera_id
+        check_camera_id(camera_id)
+        check_frame_id(request.frame_id)
         camera = await asyncio.to_thread(self.state.registry.get, camera_id)
         if camera is None:
             raise _FrameRefusedError("camera_not_found", f"no camera {camera_id!r} in the registry")
@@ -111,7 +143,7 @@ class LocalizerServicer:
         if not runner.ready:
             await _abort(context, grpc.StatusCode.UNAVAILABLE, "not_ready: the model is warming up")
         try:
-            camera = await self._camera(request.camera_id)
+            camera = await self._camera(request)
             result = await runner.detect(request.image, camera, min_score=self._min_score(request),
                                          frame_id=request.frame_id or None, frontend="grpc")
         except _FrameRefusedError as error:
@@ -129,7 +161,7 @@ class LocalizerServicer:
         try:
             if not runner.ready:
                 raise _FrameRefusedError("not_ready", "the model is warming up")
-            camera = await self._camera(request.camera_id)
+            camera = await self._camera(request)
             min_score = self._min_score(request)
             # A lane holds one frame at a time, so waiting for room here is bounded per stream;
             # newer frames of this camera meanwhile replace the waiting one (DROPPED).
@@ -177,7 +209,14 @@ class LocalizerServicer:
         cameras = await asyncio.to_thread(self.state.registry.all)
         return pb.ListCamerasResponse(cameras=[camera_to_message(camera) for camera in cameras])
 
+    async def _require_camera_id(self, camera_id: str, context: grpc.aio.ServicerContext) -> None:
+        try:
+            check_camera_id(camera_id)
+        except _FrameRefusedError as error:
+            await _abort(context, grpc.StatusCode.INVALID_ARGUMENT, f"{error.code}: {error.message}")
+
     async def GetCamera(self, request: pb.GetCameraRequest, context: grpc.aio.ServicerContext) -> pb.Camera:  # noqa: N802
+        await self._require_camera_id(request.camera_id, context)
         camera = await asyncio.to_thread(self.state.registry.get, request.camera_id)
         if camera is None:
             await _abort(context, grpc.StatusCode.NOT_FOUND, f"no camera {request.camera_id!r}")
@@ -196,6 +235,7 @@ class LocalizerServicer:
     async def DeleteCamera(self, request: pb.DeleteCameraRequest,  # noqa: N802
                            context: grpc.aio.ServicerContext) -> pb.DeleteCameraResponse:
         await self._require_token(context)
+        await self._require_camera_id(request.camera_id, context)
         if not await asyncio.to_thread(self.state.registry.delete, request.camera_id):
             await _abort(context, grpc.StatusCode.NOT_FOUND, f"no camera {request.camera_id!r}")
         return pb.DeleteCameraResponse()

@@ -353,7 +353,7 @@ def expect_text(expect: Expect) -> str:
 
 
 def markdown_tables() -> str:
-    """The tables of docs/RELIABILITY.md, made from the case and scenario lists."""
+    """The tables of docs/RELIABILITY.md, made from the case and scenario lists (REST, then gRPC)."""
     lines = [
         "| case | request | answer | message holds | server after | reproduce |",
         "|---|---|---|---|---|---|",
@@ -364,12 +364,16 @@ def markdown_tables() -> str:
             f"| `{case.name}` | {_cell(case.method)} {_cell(case.what)} | {expect_text(case.expect)} | "
             f"{_cell(case.expect.message) or '-'} | {after} | `{case_test_id(case)}` |"
         )
+    # Imported here: the gRPC cases are made from this module's frame cases.
+    from reliability_grpc_cases import GRPC_SCENARIOS, grpc_markdown_tables
+
+    lines += ["", *grpc_markdown_tables({case.name: case for case in ALL_CASES})]
     lines += [
         "",
         "| scenario | what is done | observed | reproduce |",
         "|---|---|---|---|",
     ]
-    for row in SCENARIOS:
+    for row in SCENARIOS + GRPC_SCENARIOS:
         lines.append(f"| `{row.name}` | {_cell(row.what)} | {_cell(row.observed)} | `{row.test}` |")
     return "\n".join(lines) + "\n"
 

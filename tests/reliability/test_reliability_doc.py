@@ -8,6 +8,7 @@ import re
 from pathlib import Path
 
 from reliability_cases import ALL_CASES, SCENARIOS, document_block, markdown_tables
+from reliability_grpc_cases import GRPC_CAMERA_CASES, GRPC_FRAME_CASES, GRPC_SCENARIOS
 
 ROOT = Path(__file__).resolve().parents[2]
 DOCUMENT = ROOT / "docs" / "RELIABILITY.md"
@@ -21,8 +22,15 @@ def test_document_tables_match_the_case_list() -> None:
 
 
 def test_case_and_scenario_names_are_unique() -> None:
-    names = [case.name for case in ALL_CASES] + [row.name for row in SCENARIOS]
+    names = [case.name for case in ALL_CASES] + [row.name for row in SCENARIOS + GRPC_SCENARIOS]
     assert len(names) == len(set(names))
+    # A gRPC case may share the name of the REST case of the same input, never another's.
+    grpc_names = [case.name for case in GRPC_FRAME_CASES] + [case.name for case in GRPC_CAMERA_CASES]
+    assert len(grpc_names) == len(set(grpc_names))
+    rest = {case.name for case in ALL_CASES}
+    for case in GRPC_FRAME_CASES:
+        assert case.rest is None or case.rest in rest, case.name
+        assert case.name not in rest or case.rest == case.name, case.name
 
 
 def test_every_named_test_exists() -> None:

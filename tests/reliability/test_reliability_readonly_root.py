@@ -1,9 +1,13 @@
 """`fishloc serve` on a read-only root filesystem, as the container runs it (`docker run --read-only`,
 Kubernetes `readOnlyRootFilesystem: true`): only the registry's folder is writable (a tmpfs here,
-the volume /var/lib/fishloc in the image). It must start, become ready, write cameras and detect."""
+the volume /var/lib/fishloc in the image). It must start, become ready, write cameras and detect.
+
+A machine that does not allow mount namespaces skips it with the reason; in CI (CI=true) that
+fails the run, so the read-only root is never left untested there."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 from pathlib import Path
 
@@ -25,8 +29,28 @@ READ_ONLY_ROOT = ["unshare", "--mount", "sh", "-c",
 
 def _namespaces_allowed(folder: Path) -> bool:
     env = {"FISHLOC_DATA": str(folder), "PATH": "/usr/bin:/bin"}
-    probe = subprocess.run([*READ_ONLY_ROOT, "true"], env=env, capture_output=True, check=False, timeout=30)
+    try:
+        probe = subprocess.run([*READ_ONLY_ROOT, "true"], env=env, capture_output=True, check=False,
+                               timeout=30)
+    except FileNotFoundError:  # no unshare at all
+        return False
     return probe.returncode == 0
+
+
+def unavailable(reason: str) -> None:
+    """Skip (fail in CI) because a read-only root cannot be made here."""
+    if os.environ.get("CI", "").lower() == "true":
+        pytest.fail(f"the read-only root test cannot run in CI: {reason}")
+    pytest.skip(reason)
+
+
+def test_no_namespaces_skips_here_but_fails_in_ci(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(pytest.fail.Exception, match="cannot run in CI: no namespaces"):
+        unavailable("no namespaces")
+    monkeypatch.delenv("CI")
+    with pytest.raises(pytest.skip.Exception, match="no namespaces"):
+        unavailable("no namespaces")
 
 
 def test_serves_from_a_read_only_root(double_model_path: Path, tmp_path: Path,
@@ -34,7 +58,7 @@ def test_serves_from_a_read_only_root(double_model_path: Path, tmp_path: Path,
     data = tmp_path / "registry"
     data.mkdir()
     if not _namespaces_allowed(data):
-        pytest.skip("this machine does not allow mount namespaces (unshare --mount)")
+        unavailable("this machine does not allow mount namespaces (unshare --mount)")
     env = {"FISHLOC_DATA": str(data)}
     server = ServeProcess(serve_args(double_model_path, data / "cameras.db"), env, launcher=READ_ONLY_ROOT)
     with server:

@@ -76,8 +76,10 @@ class LocalizerServicer:
 
     def Detect(self, request, context):
         """One frame, one answer. Failures are gRPC errors: NOT_FOUND (unknown camera), INVALID_ARGUMENT
-        (undecodable image, not JPEG/PNG, frame size not the camera's aspect ratio, bad min_score),
-        RESOURCE_EXHAUSTED (too many frames in flight; retry later), UNAVAILABLE (model warming up).
+        (undecodable image, not JPEG/PNG, frame size not the camera's aspect ratio, bad min_score,
+        camera_id not a camera id, frame_id over 128 characters), RESOURCE_EXHAUSTED (too many frames
+        in flight; retry later), UNAVAILABLE (model warming up). Their details start with the REST
+        error code (e.g. `bad_image: ...`).
         """
         context.set_code(grpc.StatusCode.UNIMPLEMENTED)
         context.set_details('Method not implemented!')
@@ -104,7 +106,8 @@ class LocalizerServicer:
 
     def ListCameras(self, request, context):
         """The camera registry. Writes need metadata `authorization: Bearer <token>` when the server has
-        a token (UNAUTHENTICATED otherwise); an invalid calibration is INVALID_ARGUMENT.
+        a token (UNAUTHENTICATED otherwise); an invalid calibration, or a camera_id that no camera can
+        have, is INVALID_ARGUMENT.
         """
         context.set_code(grpc.StatusCode.UNIMPLEMENTED)
         context.set_details('Method not implemented!')
