@@ -87,7 +87,8 @@ def plot_training(records: Sequence[dict[str, Any]], path: Path) -> None:
     if metric_axes.get_legend_handles_labels()[0]:
         metric_axes.legend()
     else:  # trained without --val
-        metric_axes.text(0.5, 0.5, "no validation set", ha="center", va="center", transform=metric_axes.transAxes)
+        metric_axes.text(0.5, 0.5, "no validation set", ha="center", va="center",
+                         transform=metric_axes.transAxes)
     for axes in (loss_axes, metric_axes):
         axes.grid(alpha=0.3)
     figure.tight_layout()

@@ -77,9 +77,10 @@ def default_serve(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     home = tmp_path_factory.mktemp("serve-home")
     http_port = _free_port()
     env = {**os.environ, "XDG_DATA_HOME": str(home), "FISHLOC_THREADS": "1"}
-    process = subprocess.Popen(
+    log = home / "serve.log"
+    process = subprocess.Popen(  # logs to a file: a pipe nobody reads could fill and stall the server
         [sys.executable, "-m", "service.cli", "serve", "--http-port", str(http_port), "--grpc-port", "-1"],
-        cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=log.open("w"), text=True)
     url = f"http://127.0.0.1:{http_port}"
     try:
         deadline = time.monotonic() + 120
@@ -91,7 +92,7 @@ def default_serve(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
                 pass
             time.sleep(0.1)
         else:
-            raise RuntimeError(f"fishloc serve did not become ready: {process.stderr and process.stderr.read()}")
+            raise RuntimeError(f"fishloc serve did not become ready: {log.read_text()[-2000:]}")
         yield url
     finally:
         process.send_signal(signal.SIGTERM)
@@ -140,8 +141,8 @@ def test_default_serve_finds_and_places_the_sample_people(default_serve: str) ->
 
 def test_readme_curl_works_as_written(default_serve: str) -> None:
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
-    match = re.search(r"^(curl -s --data-binary @samples/\S+ .*\\\n\s+localhost:8000/v1/cameras/demo/detect)$",
-                      readme, flags=re.MULTILINE)
+    pattern = r"^(curl -s --data-binary @samples/\S+ .*\\\n\s+localhost:8000/v1/cameras/demo/detect)$"
+    match = re.search(pattern, readme, flags=re.MULTILINE)
     assert match, "the README's detect example is not where this test looks for it"
     port = default_serve.rsplit(":", 1)[1]
     command = match.group(1).replace("localhost:8000", f"127.0.0.1:{port}")
