@@ -78,9 +78,11 @@ def default_serve(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     http_port = _free_port()
     env = {**os.environ, "XDG_DATA_HOME": str(home), "FISHLOC_THREADS": "1"}
     log = home / "serve.log"
-    process = subprocess.Popen(  # logs to a file: a pipe nobody reads could fill and stall the server
-        [sys.executable, "-m", "service.cli", "serve", "--http-port", str(http_port), "--grpc-port", "-1"],
-        cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=log.open("w"), text=True)
+    with log.open("w") as log_file:  # a file: a pipe nobody reads could fill and stall the server
+        process = subprocess.Popen(
+            [sys.executable, "-m", "service.cli", "serve", "--http-port", str(http_port),
+             "--grpc-port", "-1"],
+            cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=log_file)
     url = f"http://127.0.0.1:{http_port}"
     try:
         deadline = time.monotonic() + 120
