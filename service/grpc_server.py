@@ -183,12 +183,8 @@ class LocalizerServicer:
     async def StreamDetect(self, request_iterator: AsyncIterator[pb.DetectRequest],  # noqa: N802
                            context: grpc.aio.ServicerContext) -> AsyncIterator[pb.DetectResponse]:
         await self._require_detect_token(context)
-        dropped = self.state.metrics.dropped
-
-        def count_drop(camera_id: str) -> None:
-            dropped.labels(camera_id=camera_id).inc()
-
-        stream = FrameStream(request_iterator, self._stream_frame, self.stopping, on_drop=count_drop)
+        stream = FrameStream(request_iterator, self._stream_frame, self.stopping,
+                             on_drop=self.state.metrics.count_dropped)
         async for response in stream.responses():
             yield response
         log.info("stream ended: %d frames, %d answered, %d dropped", stream.counts.received,

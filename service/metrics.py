@@ -11,6 +11,10 @@ from service.result import DetectionResult
 _STAGE_BUCKETS_S = (0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0)
 
 CONTENT_TYPE = CONTENT_TYPE_LATEST
+# Camera ids come from clients; past this many distinct ids per metric, the rest share one label,
+# so a client that invents ids cannot grow the exposition without bound.
+MAX_CAMERA_LABELS = 256
+OTHER_CAMERAS = "_other"
 
 
 class ServiceMetrics:
@@ -52,16 +56,30 @@ class ServiceMetrics:
         self.in_flight = Gauge("fishloc_in_flight", "Frames being processed now.", registry=self.registry)
         self.ready = Gauge("fishloc_ready", "1 once the model is loaded and warmed up.",
                            registry=self.registry)
+        self._camera_labels: set[str] = set()
         self.model_info = Gauge(
             "fishloc_model_info", "The model being served (value 1).", ["name", "version", "input_size"],
             registry=self.registry,
         )
 
+    def camera_label(self, camera_id: str) -> str:
+        """`camera_id`, or `_other` once MAX_CAMERA_LABELS distinct ids have been labelled."""
+        if camera_id in self._camera_labels:
+            return camera_id
+        if len(self._camera_labels) >= MAX_CAMERA_LABELS:
+            return OTHER_CAMERAS
+        self._camera_labels.add(camera_id)
+        return camera_id
+
     def observe_result(self, result: DetectionResult, frontend: str) -> None:
         for stage, milliseconds in result.timing_ms.items():
             self.stage_seconds.labels(stage=stage).observe(milliseconds / 1e3)
-        self.frames.labels(camera_id=result.camera_id, frontend=frontend).inc()
-        self.detections.labels(camera_id=result.camera_id).inc(len(result.detections))
+        camera = self.camera_label(result.camera_id)
+        self.frames.labels(camera_id=camera, frontend=frontend).inc()
+        self.detections.labels(camera_id=camera).inc(len(result.detections))
+
+    def count_dropped(self, camera_id: str) -> None:
+        self.dropped.labels(camera_id=self.camera_label(camera_id)).inc()
 
     def exposition(self) -> bytes:
         return generate_latest(self.registry)
