@@ -81,3 +81,28 @@ class LiveServer:
 
     def __exit__(self, *_exc: Any) -> None:
         self.stop()
+
+
+def free_port() -> int:
+    """A loopback TCP port that is free right now."""
+    import socket
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def wait_until_ready(url: str, process: Any = None, timeout_s: float = 120) -> None:
+    """Poll `url`/readyz until it answers 200; TimeoutError past `timeout_s` (a bound, not an
+    assertion on time), RuntimeError when `process` (a Popen) exits first."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if process is not None and process.poll() is not None:
+            raise RuntimeError(f"the server exited with code {process.returncode} before it was ready")
+        try:
+            if httpx.get(f"{url}/readyz").status_code == 200:
+                return
+        except httpx.TransportError:
+            pass
+        time.sleep(0.05)
+    raise TimeoutError(f"{url} did not become ready")

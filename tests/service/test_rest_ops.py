@@ -9,7 +9,7 @@ from pathlib import Path
 import httpx
 import pytest
 from service_frames import encode, person_frame
-from service_live_server import LiveServer
+from service_live_server import LiveServer, free_port, wait_until_ready
 
 from fisheye import FisheyeCamera
 
@@ -103,21 +103,12 @@ def test_model_without_the_contract_is_refused(tmp_path: Path) -> None:
             OnnxModel(tmp_path / name, SessionThreads(1))
 
 
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
-
-
 def test_fishloc_serve_end_to_end(tmp_path: Path, double_model_path: Path,
                                   demo_camera: FisheyeCamera) -> None:
     """`fishloc serve` as users run it: start, answer a frame, stop on SIGTERM with exit code 0."""
     import signal
-    import time
 
-    http_port, grpc_port = _free_port(), _free_port()
+    http_port, grpc_port = free_port(), free_port()
     process = subprocess.Popen(
         [sys.executable, "-m", "service.cli", "serve", "--model", str(double_model_path), "--http-port",
          str(http_port), "--grpc-port", str(grpc_port), "--database", str(tmp_path / "cameras.db")],
@@ -125,14 +116,7 @@ def test_fishloc_serve_end_to_end(tmp_path: Path, double_model_path: Path,
     )
     try:
         url = f"http://127.0.0.1:{http_port}"
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
-            try:
-                if httpx.get(f"{url}/readyz").status_code == 200:
-                    break
-            except httpx.TransportError:
-                pass
-            time.sleep(0.05)
+        wait_until_ready(url, process)
         truth = person_frame(demo_camera, (0.9, -1.3), (1024, 1024), disk_radius_px=20)
         answer = httpx.post(f"{url}/v1/cameras/demo/detect", content=encode(truth.bgr), headers=JPEG)
         assert answer.status_code == 200
@@ -150,9 +134,8 @@ def test_pipeline_log_lines_carry_the_request_id(tmp_path: Path, double_model_pa
     import json
     import os
     import signal
-    import time
 
-    http_port = _free_port()
+    http_port = free_port()
     process = subprocess.Popen(
         [sys.executable, "-m", "service.cli", "serve", "--model", str(double_model_path), "--http-port",
          str(http_port), "--grpc-port", "-1", "--database", str(tmp_path / "cameras.db")],
@@ -161,14 +144,7 @@ def test_pipeline_log_lines_carry_the_request_id(tmp_path: Path, double_model_pa
     )
     try:
         url = f"http://127.0.0.1:{http_port}"
-        deadline = time.monotonic() + 60  # a bound, not an assertion
-        while time.monotonic() < deadline:
-            try:
-                if httpx.get(f"{url}/readyz").status_code == 200:
-                    break
-            except httpx.TransportError:
-                pass
-            time.sleep(0.05)
+        wait_until_ready(url, process)
         truth = person_frame(demo_camera, (0.9, -1.3), (1024, 1024), disk_radius_px=20)
         answer = httpx.post(f"{url}/v1/cameras/demo/detect", content=encode(truth.bgr),
                             headers=JPEG | {"X-Request-ID": "trace-7"}, params={"frame_id": "f-7"})

@@ -11,10 +11,8 @@ import json
 import os
 import re
 import signal
-import socket
 import subprocess
 import sys
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -23,6 +21,7 @@ import httpx
 import numpy as np
 import pytest
 from numpy.typing import NDArray
+from service_live_server import free_port, wait_until_ready
 
 from fisheye import load_camera
 from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
@@ -34,12 +33,6 @@ SAMPLES = ROOT / "samples"
 MATCH_M = 0.6
 MIN_RECALL = 0.7  # of the annotated (non-ignore) people over the three frames
 MAX_FALSE_PER_FRAME = 2.0  # detections farther than MATCH_M from every person, ignore regions included
-
-
-def _free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
 
 
 def _annotations() -> dict[str, Any]:
@@ -75,7 +68,7 @@ def _greedy_matches(truth_xy: NDArray[np.float64], found_xy: NDArray[np.float64]
 def default_serve(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     """`fishloc serve` with no model or camera flags, its registry under a fresh XDG_DATA_HOME."""
     home = tmp_path_factory.mktemp("serve-home")
-    http_port = _free_port()
+    http_port = free_port()
     env = {**os.environ, "XDG_DATA_HOME": str(home), "FISHLOC_THREADS": "1"}
     log = home / "serve.log"
     with log.open("w") as log_file:  # a file: a pipe nobody reads could fill and stall the server
@@ -85,16 +78,10 @@ def default_serve(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
             cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=log_file)
     url = f"http://127.0.0.1:{http_port}"
     try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and process.poll() is None:
-            try:
-                if httpx.get(f"{url}/readyz").status_code == 200:
-                    break
-            except httpx.TransportError:
-                pass
-            time.sleep(0.1)
-        else:
-            raise RuntimeError(f"fishloc serve did not become ready: {log.read_text()[-2000:]}")
+        try:
+            wait_until_ready(url, process)
+        except (RuntimeError, TimeoutError) as error:
+            raise RuntimeError(f"{error}: {log.read_text()[-2000:]}") from None
         yield url
     finally:
         process.send_signal(signal.SIGTERM)
