@@ -10,6 +10,7 @@ Timeout` and the connection is closed. The body has its own deadline (`service.r
 from __future__ import annotations
 
 import asyncio
+import socket
 from typing import Any
 
 from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
@@ -21,6 +22,15 @@ _TIMEOUT_ANSWER = (
     b"HTTP/1.1 408 Request Timeout\r\ncontent-type: application/json\r\nconnection: close\r\n"
     + b"content-length: %d\r\n\r\n" % len(_TIMEOUT_BODY) + _TIMEOUT_BODY
 )
+
+
+def _no_delay(transport: asyncio.Transport) -> None:
+    """TCP_NODELAY on the connection. uvicorn writes a response's head and body as two sends; with
+    Nagle's algorithm the body waits for the client to ACK the head, which a client that delays its
+    ACKs does after 40 ms (measured: a 2952x2952 frame answered in 71 ms instead of 29 ms)."""
+    sock = transport.get_extra_info("socket")
+    if sock is not None and sock.family in (socket.AF_INET, socket.AF_INET6):
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
 
 class HeadDeadlineProtocol(HttpToolsProtocol):
@@ -49,6 +59,7 @@ class HeadDeadlineProtocol(HttpToolsProtocol):
 
     def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
         super().connection_made(transport)
+        _no_delay(transport)
         self._arm_head_deadline()
 
     def connection_lost(self, exc: Exception | None) -> None:
