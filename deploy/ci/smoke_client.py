@@ -142,8 +142,9 @@ def check_detect(base: str, samples: Path, match_m: float) -> None:
     found = [min((math.dist(t, p) for p in positions), default=math.inf) for t in truth]
     matched = sum(error <= match_m for error in found)
     print(f"smoke: {image['file_name']}: {matched}/{len(truth)} people found within {match_m} m")
-    if truth and matched == 0:
-        raise SmokeError(f"no detection within {match_m} m of any of the {len(truth)} people")
+    # The shipped model finds 7 of this frame's 10 people (models/MODEL_CARD.md); half is the floor.
+    if truth and matched < len(truth) / 2:
+        raise SmokeError(f"only {matched} of the {len(truth)} people have a detection within {match_m} m")
 
 
 def check_metrics(base: str) -> None:
