@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import socket
 import subprocess
 import sys
 import threading
@@ -18,7 +17,7 @@ import cv2
 import numpy as np
 import pytest
 from service_frames import encode, person_frame
-from service_live_server import LiveServer
+from service_live_server import LiveServer, free_port
 
 from fisheye import FisheyeCamera
 from service.config import Settings
@@ -64,6 +63,19 @@ def check_positions(lines: list[dict[str, Any]], truth: dict[str, tuple[float, f
     return checked
 
 
+
+def gateway_thread(gateway: Gateway) -> tuple[threading.Thread, dict[str, Any]]:
+    """A thread (not started) that runs the gateway; `outcome` gets its "counts" or its "error"."""
+    outcome: dict[str, Any] = {}
+
+    def run_gateway() -> None:
+        try:
+            outcome["counts"] = asyncio.run(gateway.run())
+        except BaseException as error:  # reported to the test thread
+            outcome["error"] = error
+
+    return threading.Thread(target=run_gateway), outcome
+
 def test_gateway_streams_a_folder(server: LiveServer, demo_camera: FisheyeCamera, tmp_path: Path) -> None:
     truth: dict[str, tuple[float, float]] = {}
     for index, spot in enumerate(SPOTS):
@@ -98,31 +110,17 @@ def test_gateway_streams_a_video_file(server: LiveServer, demo_camera: FisheyeCa
     assert counts["errors"] == 0 and check_positions(lines, truth) == counts["answered"] >= 1
 
 
-def _free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
-
-
 def test_gateway_reconnects_to_a_server_that_starts_late(settings_for: Callable[..., Settings],
                                                          demo_camera: FisheyeCamera, tmp_path: Path) -> None:
     for index, spot in enumerate(SPOTS[:3]):
         frame = person_frame(demo_camera, spot, (512, 512), disk_radius_px=12)
         (tmp_path / f"{index}.jpg").write_bytes(encode(frame.bgr))
-    port = _free_port()
+    port = free_port()
     lines: list[str] = []
     config = GatewayConfig(server=f"127.0.0.1:{port}", camera_id="demo", fps=0, max_backoff_s=0.5,
                            max_reconnects=200)
     gateway = Gateway(config, FolderSource(tmp_path), lines.append)
-    outcome: dict[str, Any] = {}
-
-    def run_gateway() -> None:
-        try:
-            outcome["counts"] = asyncio.run(gateway.run())
-        except BaseException as error:
-            outcome["error"] = error
-
-    thread = threading.Thread(target=run_gateway)
+    thread, outcome = gateway_thread(gateway)
     thread.start()
     deadline = time.monotonic() + 30
     while gateway.counts.reconnects < 1 and time.monotonic() < deadline:
@@ -166,21 +164,13 @@ def test_gateway_goes_on_after_the_server_restarts_mid_stream(settings_for: Call
     for index in range(10):
         frame = person_frame(demo_camera, SPOTS[index % len(SPOTS)], (512, 512), disk_radius_px=12)
         (tmp_path / f"{index:02d}.jpg").write_bytes(encode(frame.bgr))
-    port = _free_port()
+    port = free_port()
     lines: list[dict[str, Any]] = []
     config = GatewayConfig(server=f"127.0.0.1:{port}", camera_id="demo", fps=0, max_backoff_s=0.5,
                            max_reconnects=200)
     source = PausingFolder(tmp_path, pause_after=4)
     gateway = Gateway(config, source, lambda line: lines.append(json.loads(line)))
-    outcome: dict[str, Any] = {}
-
-    def run_gateway() -> None:
-        try:
-            outcome["counts"] = asyncio.run(gateway.run())
-        except BaseException as error:
-            outcome["error"] = error
-
-    thread = threading.Thread(target=run_gateway)
+    thread, outcome = gateway_thread(gateway)
     first = LiveServer(settings_for(grpc_port=port)).start()
     try:
         thread.start()
