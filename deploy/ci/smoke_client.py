@@ -4,7 +4,8 @@ Usage: python deploy/ci/smoke_client.py --http http://127.0.0.1:PORT [--grpc 127
            [--samples samples] [--timeout-s 180]
 
 With `samples/annotations.json` present, the frame holding the most people is posted to the `demo`
-camera and at least one detection must stand within --match-m of a true floor position; without it,
+camera and a third of its people must have a detection within --match-m of their floor position
+(0.6 m: the foot point of even a perfect box misses the ankles by 0.2 m at the median); without it,
 a grey square JPEG (the demo camera's aspect ratio) checks the answer's shape only, and so does a
 model whose metadata says it is untrained (a placeholder cannot find people; this is printed).
 Exit 0 when every check passed; prints one line per check.
@@ -142,8 +143,9 @@ def check_detect(base: str, samples: Path, match_m: float) -> None:
     found = [min((math.dist(t, p) for p in positions), default=math.inf) for t in truth]
     matched = sum(error <= match_m for error in found)
     print(f"smoke: {image['file_name']}: {matched}/{len(truth)} people found within {match_m} m")
-    # The shipped model finds 7 of this frame's 10 people (models/MODEL_CARD.md); half is the floor.
-    if truth and matched < len(truth) / 2:
+    # The shipped model places 7 of this frame's 10 people within 0.6 m (tests/service/test_samples.py
+    # holds it to 40 % over the three samples); a third is the floor here.
+    if truth and matched < len(truth) / 3:
         raise SmokeError(f"only {matched} of the {len(truth)} people have a detection within {match_m} m")
 
 
@@ -182,7 +184,7 @@ def main() -> int:
     parser.add_argument("--grpc", help="host:port of the gRPC server (health check)")
     parser.add_argument("--samples", type=Path, default=Path("samples"))
     parser.add_argument("--timeout-s", type=float, default=180.0)
-    parser.add_argument("--match-m", type=float, default=0.5, help="floor distance of a correct detection")
+    parser.add_argument("--match-m", type=float, default=0.6, help="floor distance of a correct detection")
     args = parser.parse_args()
     base = args.http.rstrip("/")
     try:
