@@ -21,6 +21,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.ci_policy import skip_or_fail_in_ci
+
 
 def _server_bindir() -> Path | None:
     """The folder holding initdb, pg_ctl and postgres: Debian's newest version, else PATH."""
@@ -87,9 +89,7 @@ class PostgresServer:
 
 
 def _missing(reason: str) -> None:
-    if os.environ.get("CI") == "true":
-        pytest.fail(f"{reason} (CI must have PostgreSQL: .ci/run installs Debian's postgresql)")
-    pytest.skip(reason)
+    skip_or_fail_in_ci(reason, f"{reason} (CI must have PostgreSQL: .ci/run installs Debian's postgresql)")
 
 
 @pytest.fixture(scope="session")

@@ -7,7 +7,6 @@ fails the run, so the read-only root is never left untested there."""
 
 from __future__ import annotations
 
-import os
 import subprocess
 from pathlib import Path
 
@@ -18,6 +17,7 @@ from reliability_samples import Samples
 from reliability_support import ServeProcess, serve_args
 
 from fisheye import FisheyeCamera, camera_to_dict
+from tests.ci_policy import skip_or_fail_in_ci
 
 pytest_plugins = ["reliability_fixtures"]
 
@@ -39,9 +39,7 @@ def _namespaces_allowed(folder: Path) -> bool:
 
 def unavailable(reason: str) -> None:
     """Skip (fail in CI) because a read-only root cannot be made here."""
-    if os.environ.get("CI", "").lower() == "true":
-        pytest.fail(f"the read-only root test cannot run in CI: {reason}")
-    pytest.skip(reason)
+    skip_or_fail_in_ci(reason, f"the read-only root test cannot run in CI: {reason}")
 
 
 def test_no_namespaces_skips_here_but_fails_in_ci(monkeypatch: pytest.MonkeyPatch) -> None:

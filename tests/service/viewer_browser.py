@@ -18,6 +18,8 @@ from typing import Any, TypeVar
 
 import pytest
 
+from tests.ci_policy import skip_or_fail_in_ci
+
 CHROMIUM_PATHS = ("/usr/bin/chromium", "/usr/bin/chromium-browser")
 CHROMEDRIVER_PATHS = ("/usr/bin/chromedriver",)
 # Without the networking switches Chromium keeps calling home, which a closed network answers slowly.
@@ -36,9 +38,7 @@ def _first_existing(paths: tuple[str, ...]) -> str | None:
 
 def unavailable(reason: str) -> None:
     """Skip (fail in CI) because the browser cannot run here."""
-    if os.environ.get("CI", "").lower() == "true":
-        pytest.fail(f"the viewer's browser test cannot run in CI: {reason}")
-    pytest.skip(reason)
+    skip_or_fail_in_ci(reason, f"the viewer's browser test cannot run in CI: {reason}")
 
 
 @contextmanager
