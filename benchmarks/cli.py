@@ -36,10 +36,10 @@ from benchmarks.report import (
 )
 from benchmarks.server_process import ServerProcess
 from benchmarks.stats import overhead_pct
+from contract import ModelError, OnnxModel, SessionThreads
 from fisheye import FisheyeCamera, load_camera
 from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
 from service.cpu import cpu_budget
-from service.onnx_model import ModelError, OnnxModel, SessionThreads
 
 SECTION_CHOICES = ("in-process", "http", "grpc")
 

@@ -5,10 +5,11 @@ a shared machine hits them alike and their ratios stay meaningful:
 
 - *service*: `Pipeline.detect` as `fishloc serve` builds it (`build_runner`: its session options,
   thread counts and OpenCV threading), timed whole, and the same calls timed stage by stage:
-  decode (header + reduced-scale JPEG decode), preprocess (letterbox), inference (onnxruntime),
-  postprocess (threshold, boxes to frame px, rotated NMS), localization (foot points, floor, site).
-- *naive*: full-size `cv2.imdecode`, `cv2.resize`, onnxruntime with default session options, then
-  the same post-processing: what a first attempt would do.
+  decode (header + reduced-scale JPEG decode), preprocess (letterbox or polar unwrap), inference
+  (onnxruntime), postprocess (threshold, boxes to frame px, rotated NMS), localization (foot
+  points, floor, site).
+- *naive*: full-size `cv2.imdecode`, the model's view made from the full frame, onnxruntime with
+  default session options, then the same post-processing: what a first attempt would do.
 - *floor*: model inference alone on an input decoded and letterboxed beforehand, and the decode
   alone; their sum is what any service must spend on a frame, and the service's overhead is
   measured over it (in wall-clock and, less sensitive to other processes, in CPU time).
@@ -16,7 +17,6 @@ a shared machine hits them alike and their ratios stay meaningful:
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -30,7 +30,8 @@ from numpy.typing import NDArray
 
 from benchmarks.frames import FrameSet
 from benchmarks.stats import Summary, overhead_pct, ratio, summarize
-from fisheye import FisheyeCamera, Letterbox
+from contract import InputMapping, RawOutputs, min_decoded_side, prepare_input
+from fisheye import FisheyeCamera
 from service.config import Settings
 from service.frame_decode import decode_frame, read_header
 from service.metrics import ServiceMetrics
@@ -51,16 +52,15 @@ def staged_detect(pipeline: Pipeline, data: bytes, camera: FisheyeCamera,
     start, start_cpu = time.perf_counter(), time.thread_time()
     header = read_header(data)
     frame_camera = camera.scaled_to(header.size_wh)
-    frame = decode_frame(data, info.input_size, pipeline.config.max_pixels, header)
+    frame = decode_frame(data, min_decoded_side(info, frame_camera), pipeline.config.max_pixels, header)
     decoded, decoded_cpu = time.perf_counter(), time.thread_time()
-    letterbox = Letterbox.fit(frame.frame_wh, info.input_size)
-    image = dataclasses.replace(letterbox, frame_wh=frame.decoded_wh).apply(frame.rgb, info.pad_value)
+    image, mapping = prepare_input(info, frame.rgb, frame_camera)
     preprocessed = time.perf_counter()
-    boxes_input, scores = pipeline.model.run(image)
+    raw = pipeline.model.run(image)
     inferred = time.perf_counter()
-    boxes_frame, kept_scores = pipeline.select(boxes_input, scores, threshold, letterbox, frame_camera)
+    kept = pipeline.select(raw, mapping, threshold, frame_camera)
     selected = time.perf_counter()
-    detections = localize(boxes_frame, kept_scores, frame_camera)
+    detections = localize(kept.boxes_cxcywh, kept.scores, frame_camera, kept.foot_px)
     done = time.perf_counter()
     marks = (start, decoded, preprocessed, inferred, selected, done)
     times = {stage: (b - a) * 1e3 for stage, a, b in zip(STAGES, marks, marks[1:], strict=False)}
@@ -70,37 +70,36 @@ def staged_detect(pipeline: Pipeline, data: bytes, camera: FisheyeCamera,
 
 
 class NaivePipeline:
-    """Full decode, plain resize, a default onnxruntime session; the service's post-processing."""
+    """Full decode, the model's view made from the full frame, a default onnxruntime session; the
+    service's post-processing."""
 
-    def __init__(self, model_path: str | Path, pipeline: Pipeline) -> None:
+    def __init__(self, model_path: str | Path, pipeline: Pipeline, camera: FisheyeCamera) -> None:
         self.session = ort.InferenceSession(str(model_path), providers=["CPUExecutionProvider"])
         self.pipeline = pipeline
+        self.camera = camera
 
-    def letterboxed(self, data: bytes) -> tuple[NDArray[np.uint8], Letterbox]:
-        return self.letterbox_only(data, self.pipeline)
+    def model_input(self, data: bytes) -> tuple[NDArray[np.uint8], InputMapping, FisheyeCamera]:
+        return self.full_decode_input(data, self.pipeline, self.camera)
 
     @staticmethod
-    def letterbox_only(data: bytes, pipeline: Pipeline) -> tuple[NDArray[np.uint8], Letterbox]:
-        """Full decode and plain resize of `data` to `pipeline`'s input: (S, S, 3) RGB, its letterbox."""
+    def full_decode_input(data: bytes, pipeline: Pipeline, camera: FisheyeCamera
+                          ) -> tuple[NDArray[np.uint8], InputMapping, FisheyeCamera]:
+        """Full decode of `data` and `pipeline`'s view of it: the model input, its mapping to frame
+        px and the camera scaled to the frame."""
         bgr = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_COLOR)
         if bgr is None:
             raise ValueError("OpenCV cannot decode the frame")
-        rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
-        info = pipeline.info
-        letterbox = Letterbox.fit((rgb.shape[1], rgb.shape[0]), info.input_size)
-        resized = cv2.resize(rgb, letterbox.resized_wh)
-        canvas = np.full((info.input_size, info.input_size, 3), info.pad_value, dtype=np.uint8)
-        x0, y0 = letterbox.offset_xy
-        canvas[y0:y0 + resized.shape[0], x0:x0 + resized.shape[1]] = resized
-        return canvas, letterbox
+        rgb = np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), dtype=np.uint8)
+        frame_camera = camera.scaled_to((rgb.shape[1], rgb.shape[0]))
+        image, mapping = prepare_input(pipeline.info, rgb, frame_camera)
+        return image, mapping, frame_camera
 
-    def detect(self, data: bytes, camera: FisheyeCamera, threshold: float) -> Detections:
-        image, letterbox = self.letterboxed(data)
+    def detect(self, data: bytes, threshold: float) -> Detections:
+        image, mapping, frame_camera = self.model_input(data)
         boxes, scores = self.session.run(["boxes", "scores"], {"image": image[None]})
-        frame_camera = camera.scaled_to(letterbox.frame_wh)
-        kept = self.pipeline.select(np.asarray(boxes[0], np.float32), np.asarray(scores[0], np.float32),
-                                    threshold, letterbox, frame_camera)
-        return localize(*kept, frame_camera)
+        raw = RawOutputs(np.asarray(boxes[0], np.float32), np.asarray(scores[0], np.float32))
+        kept = self.pipeline.select(raw, mapping, threshold, frame_camera)
+        return localize(kept.boxes_cxcywh, kept.scores, frame_camera)
 
 
 @dataclass(frozen=True)
@@ -181,19 +180,18 @@ def service_pipeline(model_path: Path, threads: int) -> Pipeline:
 def run_in_process(model_path: Path, frames: FrameSet, camera: FisheyeCamera, threads: int,
                    runs: int, warmup: int, progress: Callable[[str], None] = print) -> InProcessResult:
     pipeline = service_pipeline(model_path, threads)
-    naive = NaivePipeline(model_path, pipeline)
+    naive = NaivePipeline(model_path, pipeline, camera)
     info = pipeline.info
     threshold = info.default_min_score
-    inputs = []
-    for data in frames.data:
-        image, _ = naive.letterboxed(data)
-        inputs.append(image)
+    inputs = [naive.model_input(data)[0] for data in frames.data]
+    frame_camera = camera.scaled_to(read_header(frames.data[0]).size_wh)
+    decoded_side = min_decoded_side(info, frame_camera)
     service_threads = cv2.getNumThreads()
 
     def naive_detect(data: bytes) -> None:
         cv2.setNumThreads(_OPENCV_DEFAULT_THREADS)
         try:
-            naive.detect(data, camera, threshold)
+            naive.detect(data, threshold)
         finally:
             cv2.setNumThreads(service_threads)
 
@@ -215,7 +213,7 @@ def run_in_process(model_path: Path, frames: FrameSet, camera: FisheyeCamera, th
         _settle(0.05)
         times, found = staged_detect(pipeline, data, camera, threshold)
         _settle()
-        decode_time = _timed(partial(decode_frame, data, info.input_size, pipeline.config.max_pixels))
+        decode_time = _timed(partial(decode_frame, data, decoded_side, pipeline.config.max_pixels))
         _settle()
         floor_time, floor_cpu_ms = _timed_cpu(partial(pipeline.model.run, inputs[index % len(frames)]))
         _settle()
@@ -233,7 +231,7 @@ def run_in_process(model_path: Path, frames: FrameSet, camera: FisheyeCamera, th
         naive_ms.append(naive_time)
         floor_ms.append(floor_time)
         detections += len(found)
-    decoded = decode_frame(frames.data[0], pipeline.info.input_size, pipeline.config.max_pixels)
+    decoded = decode_frame(frames.data[0], decoded_side, pipeline.config.max_pixels)
     return InProcessResult(
         decode_reduction=decoded.reduction, decoded_wh=decoded.decoded_wh,
         stages_ms={name: summarize(values) for name, values in stages.items()},

@@ -12,8 +12,8 @@ import cv2
 import numpy as np
 import onnxruntime as ort
 
+from contract import ModelInfo
 from service.cpu import affinity_cpus, cgroup_cpu_quota, cpu_budget
-from service.onnx_model import ModelInfo
 
 
 def cpu_model_name(cpuinfo: str | None = None) -> str:

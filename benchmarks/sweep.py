@@ -102,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
     for pipeline in pipelines:
         from benchmarks.inprocess import NaivePipeline
 
-        inputs.append(NaivePipeline.letterbox_only(frames.data[0], pipeline)[0])
+        inputs.append(NaivePipeline.full_decode_input(frames.data[0], pipeline, camera)[0])
     whole: list[list[float]] = [[] for _ in pipelines]
     alone: list[list[float]] = [[] for _ in pipelines]
     whole_cpu: list[list[float]] = [[] for _ in pipelines]

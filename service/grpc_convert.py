@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from typing import Any
 
+from contract import ModelInfo
 from fisheye import FisheyeCamera, camera_from_dict, camera_to_dict
 from protos.fishloc.v1 import localizer_pb2 as pb
-from service.onnx_model import ModelInfo
 from service.result import DetectionResult, result_to_json
 
 Status = pb.DetectResponse.Status

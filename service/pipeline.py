@@ -1,14 +1,13 @@
 """The one core function of every front end: (encoded frame, camera) -> who stands where.
 
-decode (reduced-scale JPEG where the model input allows) -> letterbox -> ONNX model -> score
-threshold and rotated NMS -> boxes back to frame pixels, their angle from the camera's own principal
-point -> foot points -> floor and site positions. Torch-free: only numpy, OpenCV, onnxruntime and
-the `fisheye` geometry.
+decode (reduced-scale JPEG where the model input allows) -> the model's view of the frame
+(letterbox or polar unwrap, `contract.views`) -> ONNX model -> score threshold, boxes back to frame
+pixels and rotated NMS about the camera's own principal point (`contract.detect`) -> foot points ->
+floor and site positions. Torch-free: only numpy, OpenCV, onnxruntime, `fisheye` and `contract`.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import time
 from dataclasses import dataclass
@@ -16,9 +15,18 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from fisheye import FisheyeCamera, Letterbox, cxcywh_to_corners, foot_points, radial_angles_rad, rotated_nms
+from contract import (
+    FrameDetections,
+    InputMapping,
+    ModelInfo,
+    OnnxModel,
+    RawOutputs,
+    min_decoded_side,
+    prepare_input,
+)
+from contract import select_detections as select_raw
+from fisheye import FisheyeCamera, cxcywh_to_corners, foot_points, radial_angles_rad
 from service.frame_decode import DecodedFrame, FrameError, check_frame_size, decode_frame, read_header
-from service.onnx_model import ModelInfo, OnnxModel
 from service.result import DetectionResult, Detections
 
 FloatArray = NDArray[np.float64]
@@ -42,11 +50,13 @@ class PipelineConfig:
             raise ValueError("max_detections and max_pixels must be positive")
 
 
-def localize(boxes_frame: FloatArray, scores: FloatArray, camera: FisheyeCamera) -> Detections:
+def localize(boxes_frame: FloatArray, scores: FloatArray, camera: FisheyeCamera,
+             foot_px: FloatArray | None = None) -> Detections:
     """Radius-aligned boxes (N, 4) frame px with scores (N,) -> Detections for `camera`, which must
-    already be scaled to the frame's resolution."""
+    already be scaled to the frame's resolution. People stand at the model's own floor-contact
+    points `foot_px` (N, 2) when it predicts them, else at their boxes' foot points."""
     pp = np.asarray(camera.principal_point, dtype=np.float64)
-    foot = foot_points(boxes_frame, pp)
+    foot = foot_points(boxes_frame, pp) if foot_px is None else np.asarray(foot_px, dtype=np.float64)
     floor = camera.floor_positions(foot)
     return Detections(
         scores=np.asarray(scores, dtype=np.float64),
@@ -73,8 +83,7 @@ class Pipeline:
 
     def warm_up(self, runs: int = 2) -> None:
         """Run the model on blank inputs so the first real frame does not pay for lazy set-up."""
-        size = self.info.input_size
-        blank = np.full((size, size, 3), self.info.pad_value, dtype=np.uint8)
+        blank = self.model.blank_input()
         for _ in range(runs):
             self.model.run(blank)
 
@@ -96,19 +105,17 @@ class Pipeline:
             frame_camera = camera.scaled_to(header.size_wh)
         except ValueError as error:
             raise FrameError("frame_size_mismatch", str(error)) from None
-        frame = decode_frame(data, self.info.input_size, self.config.max_pixels, header)
+        frame = decode_frame(data, min_decoded_side(self.info, frame_camera), self.config.max_pixels, header)
         decoded = time.perf_counter()
 
-        letterbox = Letterbox.fit(frame.frame_wh, self.info.input_size)
-        # A reduced decode keeps the letterbox of the full frame: its pixels map the same way.
-        decoded_letterbox = dataclasses.replace(letterbox, frame_wh=frame.decoded_wh)
-        image = decoded_letterbox.apply(frame.rgb, self.info.pad_value)
+        image, mapping = prepare_input(self.info, frame.rgb, frame_camera)
         preprocessed = time.perf_counter()
 
-        boxes_input, scores = self.model.run(image)
+        raw = self.model.run(image)
         inferred = time.perf_counter()
 
-        detections = self._postprocess(boxes_input, scores, threshold, letterbox, frame_camera)
+        kept = self.select(raw, mapping, threshold, frame_camera)
+        detections = localize(kept.boxes_cxcywh, kept.scores, frame_camera, kept.foot_px)
         done = time.perf_counter()
         timing_ms = {
             "decode": (decoded - start) * 1e3,
@@ -126,23 +133,9 @@ class Pipeline:
                   timing_ms["total"], extra={"camera_id": camera.id, "frame_id": frame_id})
         return result, frame
 
-    def _postprocess(self, boxes_input: NDArray[np.float32], scores: NDArray[np.float32], threshold: float,
-                     letterbox: Letterbox, camera: FisheyeCamera) -> Detections:
-        return localize(*self.select(boxes_input, scores, threshold, letterbox, camera), camera)
-
-    def select(self, boxes_input: NDArray[np.float32], scores: NDArray[np.float32], threshold: float,
-               letterbox: Letterbox, camera: FisheyeCamera) -> tuple[FloatArray, FloatArray]:
-        """Model outputs -> the kept boxes (M, 4) in frame px and their scores (M,): score threshold,
-        finite positive boxes, rotated NMS about `camera`'s principal point, at most max_detections."""
-        boxes = boxes_input.astype(np.float64)
-        score = scores.astype(np.float64)
-        keep = (
-            np.isfinite(score) & (score >= threshold)
-            & np.all(np.isfinite(boxes), axis=1) & (boxes[:, 2] > 0) & (boxes[:, 3] > 0)
-        )
-        boxes_frame = letterbox.boxes_input_to_frame(boxes[keep])
-        score = score[keep]
-        pp = np.asarray(camera.principal_point, dtype=np.float64)
-        kept = rotated_nms(boxes_frame, score, pp, self.config.nms_iou)[: self.config.max_detections]
-        return boxes_frame[kept], score[kept]
-
+    def select(self, raw: RawOutputs, mapping: InputMapping, threshold: float,
+               camera: FisheyeCamera) -> FrameDetections:
+        """Model outputs -> the kept detections in frame px: score threshold, finite positive boxes,
+        rotated NMS about `camera`'s principal point, at most max_detections."""
+        pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
+        return select_raw(raw, mapping, pp, threshold, self.config.nms_iou, self.config.max_detections)

@@ -18,12 +18,12 @@ from dataclasses import dataclass
 
 import cv2
 
+from contract import OnnxModel, SessionThreads
 from fisheye import FisheyeCamera
 from service.config import Settings
 from service.frame_decode import FrameError
 from service.latest import LatestFrames
 from service.metrics import ServiceMetrics
-from service.onnx_model import OnnxModel, SessionThreads
 from service.pipeline import Pipeline, PipelineConfig
 from service.result import DetectionResult
 

@@ -10,11 +10,11 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
+from contract import ModelError
 from fisheye import CalibrationError
 from models import DEFAULT_MODEL_PATH
 from service.config import Settings
 from service.logs import configure_logging
-from service.onnx_model import ModelError
 from service.tls import TlsError
 
 log = logging.getLogger("fishloc.serve")

@@ -16,10 +16,10 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from reliability_support import save_double_model
 
+from contract import OnnxModel, SessionThreads
 from fisheye import CalibrationError, FisheyeCamera, camera_from_dict, load_camera
 from models import DEMO_CAMERA_PATH
 from service.frame_decode import FrameError, decode_frame, read_header
-from service.onnx_model import OnnxModel, SessionThreads
 from service.pipeline import Pipeline, PipelineConfig
 
 # FISHLOC_FUZZ_SCALE multiplies every example count (the long run of docs/RELIABILITY.md uses 50).

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from service.onnx_model import OnnxModel, SessionThreads
+from contract import OnnxModel, SessionThreads
 
 
 @pytest.mark.parametrize(("threads", "spinning"), [

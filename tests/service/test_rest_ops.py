@@ -90,7 +90,7 @@ def test_model_without_the_contract_is_refused(tmp_path: Path) -> None:
     import onnx
     from service_doubles import build_double_model
 
-    from service.onnx_model import ModelError, OnnxModel, SessionThreads
+    from contract import ModelError, OnnxModel, SessionThreads
 
     cases = {
         "no_metadata.onnx": build_double_model(metadata={}),

@@ -22,9 +22,9 @@ from service_doubles import (
 )
 from service_frames import encode, person_frame
 
+from contract import OnnxModel, SessionThreads
 from fisheye import FisheyeCamera, camera_from_dict, camera_to_dict, cxcywh_to_corners, foot_points
 from service.frame_decode import FrameError
-from service.onnx_model import OnnxModel, SessionThreads
 from service.pipeline import Pipeline, PipelineConfig, localize
 from service.result import result_to_json
 

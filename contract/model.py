@@ -1,0 +1,141 @@
+"""A contract-following ONNX model in an onnxruntime session with explicit thread counts.
+
+Inputs and outputs are checked on load against the model's own metadata: input `image` uint8
+[N, H, W, 3] (a square of `input_size` for the `fisheye` view, the strip for `polar`), outputs
+`boxes` float32 [N, K, 4], `scores` float32 [N, K] and, optionally, `foot` float32 [N, K, 2].
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import onnxruntime as ort
+from numpy.typing import NDArray
+
+from contract.metadata import ModelError, ModelInfo, parse_metadata
+
+FOOT_OUTPUT = "foot"
+
+
+@dataclass(frozen=True)
+class SessionThreads:
+    """onnxruntime thread counts: `intra_op` threads within an operator, `inter_op` across them.
+
+    `allow_spinning` lets idle pool threads busy-wait for the next operator (onnxruntime's default).
+    Off here: on a few shared cores the spinning threads take the CPU from the JPEG decode of the
+    next frame and from other processes; `fishloc bench` measured 1.5-2x higher latency with it on
+    a 2-core machine (README, Benchmark).
+    """
+
+    intra_op: int
+    inter_op: int = 1
+    allow_spinning: bool = False
+
+    def __post_init__(self) -> None:
+        if self.intra_op < 1 or self.inter_op < 1:
+            raise ValueError(f"thread counts must be ≥ 1, got {self.intra_op}, {self.inter_op}")
+
+
+@dataclass(frozen=True)
+class RawOutputs:
+    """One image's model outputs: `boxes` (K, 4) in input px (view's format), `scores` (K,)
+    descending, `foot` (K, 2) input px or None when the model has no `foot` output."""
+
+    boxes: NDArray[np.float32]
+    scores: NDArray[np.float32]
+    foot: NDArray[np.float32] | None = None
+
+    def __post_init__(self) -> None:
+        k = len(self.scores)
+        if self.boxes.shape != (k, 4) or self.scores.shape != (k,) or (
+                self.foot is not None and self.foot.shape != (k, 2)):
+            foot_shape = None if self.foot is None else self.foot.shape
+            raise ModelError(f"model outputs have shapes boxes {self.boxes.shape}, scores "
+                             f"{self.scores.shape}, foot {foot_shape}")
+
+
+def _check_dims(name: str, shape: list[object], expected: tuple[int | None, ...], path: Path) -> None:
+    """`shape` (an onnxruntime shape: ints, names or None) against `expected` (None: any)."""
+    if len(shape) != len(expected) or any(
+            isinstance(dim, int) and want is not None and dim != want
+            for dim, want in zip(shape, expected, strict=True)):
+        wanted = ", ".join("?" if want is None else str(want) for want in expected)
+        raise ModelError(f"{path}: '{name}' has shape {shape}, the contract wants [{wanted}]")
+
+
+def _check_signature(session: ort.InferenceSession, path: Path, info: ModelInfo) -> bool:
+    """Check the session's inputs and outputs against `info`; True when it has a `foot` output."""
+    inputs = {node.name: node for node in session.get_inputs()}
+    outputs = {node.name: node for node in session.get_outputs()}
+    if set(inputs) != {"image"} or not {"boxes", "scores"} <= set(outputs):
+        raise ModelError(
+            f"{path}: expected input 'image' and outputs 'boxes', 'scores'; the model has inputs "
+            f"{sorted(inputs)} and outputs {sorted(outputs)}"
+        )
+    image = inputs["image"]
+    if image.type != "tensor(uint8)":
+        raise ModelError(f"{path}: input 'image' must be uint8, got {image.type}")
+    width, height = info.input_wh
+    _check_dims("image", list(image.shape), (None, height, width, 3), path)
+    _check_dims("boxes", list(outputs["boxes"].shape), (None, None, 4), path)
+    _check_dims("scores", list(outputs["scores"].shape), (None, None), path)
+    if FOOT_OUTPUT in outputs:
+        _check_dims(FOOT_OUTPUT, list(outputs[FOOT_OUTPUT].shape), (None, None, 2), path)
+        return True
+    return False
+
+
+class OnnxModel:
+    """A contract-following model in an onnxruntime session with explicit thread counts."""
+
+    def __init__(self, path: str | Path, threads: SessionThreads) -> None:
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise ModelError(f"model file {self.path} does not exist")
+        data = self.path.read_bytes()
+        options = ort.SessionOptions()
+        options.intra_op_num_threads = threads.intra_op
+        options.inter_op_num_threads = threads.inter_op
+        options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+        options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+        options.log_severity_level = 3
+        spinning = "1" if threads.allow_spinning else "0"
+        options.add_session_config_entry("session.intra_op.allow_spinning", spinning)
+        options.add_session_config_entry("session.inter_op.allow_spinning", spinning)
+        try:
+            self.session = ort.InferenceSession(
+                data, sess_options=options, providers=["CPUExecutionProvider"]
+            )
+        except Exception as error:  # onnxruntime raises several untyped errors for bad files
+            raise ModelError(f"{self.path} is not a loadable ONNX model: {error}") from None
+        self.threads = threads
+        props = dict(self.session.get_modelmeta().custom_metadata_map)
+        self.info = parse_metadata(props, str(self.path), hashlib.sha256(data).hexdigest())
+        self.has_foot = _check_signature(self.session, self.path, self.info)
+        self._outputs = ["boxes", "scores", FOOT_OUTPUT] if self.has_foot else ["boxes", "scores"]
+
+    def blank_input(self) -> NDArray[np.uint8]:
+        """An input of the model's shape filled with its pad value (for warm-up)."""
+        width, height = self.info.input_wh
+        return np.full((height, width, 3), self.info.pad_value, dtype=np.uint8)
+
+    def run_batch(self, images: NDArray[np.uint8]) -> list[RawOutputs]:
+        """(N, H, W, 3) uint8 RGB inputs -> one RawOutputs each."""
+        width, height = self.info.input_wh
+        if images.ndim != 4 or images.shape[1:] != (height, width, 3) or images.dtype != np.uint8:
+            raise ValueError(f"model input must be (N, {height}, {width}, 3) uint8, "
+                             f"got {images.shape} {images.dtype}")
+        found = self.session.run(self._outputs, {"image": images})
+        boxes, scores = (np.asarray(found[i], dtype=np.float32) for i in (0, 1))
+        foot = np.asarray(found[2], dtype=np.float32) if self.has_foot else None
+        if boxes.ndim != 3 or boxes.shape[0] != len(images):
+            raise ModelError(f"model outputs have shapes boxes {boxes.shape}, scores {scores.shape}")
+        return [RawOutputs(boxes[i], scores[i], None if foot is None else foot[i])
+                for i in range(len(images))]
+
+    def run(self, image: NDArray[np.uint8]) -> RawOutputs:
+        """(H, W, 3) uint8 RGB input -> its RawOutputs."""
+        return self.run_batch(image[None])[0]

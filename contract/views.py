@@ -1,0 +1,131 @@
+"""How a decoded frame becomes a model's input, and how the model's outputs map back to the frame.
+
+- `fisheye` view: the frame letterboxed into a square (`fisheye.Letterbox`); boxes come back as
+  radius-aligned `cxcywh` in input px.
+- `polar` view: the frame unwrapped about the camera's principal point (`fisheye.polar.PolarGrid`);
+  boxes come back as `xyxy` in strip px, each the ring segment whose bounding radius-aligned box is
+  the detection. The sampling maps are cached per grid and decoded size, so a camera's frames pay
+  for them once.
+
+A frame may arrive decoded at a reduced scale (a JPEG decoded at 1/2, 1/4 or 1/8): the input is
+made from the reduced image, and every mapping goes to the full frame's pixels.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from contract.metadata import ModelInfo
+from fisheye import FisheyeCamera, Letterbox
+from fisheye.lens import theta_to_radius
+from fisheye.polar import PolarGrid, unwrap_with_maps
+
+FloatArray = NDArray[np.float64]
+
+
+class InputMapping(Protocol):
+    """Model-input coordinates -> frame px."""
+
+    def boxes_to_frame(self, boxes: NDArray[np.floating]) -> FloatArray:
+        """(N, 4) boxes in the view's format -> (N, 4) radius-aligned `cxcywh` frame px."""
+        ...
+
+    def points_to_frame(self, points: NDArray[np.floating]) -> FloatArray:
+        """(N, 2) input px -> (N, 2) frame px."""
+        ...
+
+    def has_area(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
+        """(N,) which of (N, 4) finite boxes in the view's format have a positive size."""
+        ...
+
+
+@dataclass(frozen=True)
+class FisheyeInput:
+    """The `fisheye` view's mapping: a letterbox of the full frame."""
+
+    letterbox: Letterbox
+
+    def boxes_to_frame(self, boxes: NDArray[np.floating]) -> FloatArray:
+        return self.letterbox.boxes_input_to_frame(boxes).reshape(-1, 4)
+
+    def points_to_frame(self, points: NDArray[np.floating]) -> FloatArray:
+        return self.letterbox.input_to_frame(points).reshape(-1, 2)
+
+    def has_area(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
+        return (boxes[:, 2] > 0) & (boxes[:, 3] > 0)
+
+
+@dataclass(frozen=True)
+class PolarInput:
+    """The `polar` view's mapping: the strip's grid in full-frame px."""
+
+    grid: PolarGrid
+
+    def boxes_to_frame(self, boxes: NDArray[np.floating]) -> FloatArray:
+        return self.grid.polar_to_radius_aligned(boxes).reshape(-1, 4)
+
+    def points_to_frame(self, points: NDArray[np.floating]) -> FloatArray:
+        return self.grid.strip_to_frame(points).reshape(-1, 2)
+
+    def has_area(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
+        return (boxes[:, 2] > boxes[:, 0]) & (boxes[:, 3] > boxes[:, 1])
+
+
+def polar_radius_px(camera: FisheyeCamera, max_theta_deg: float) -> float:
+    """Frame px from the principal point to the ring θ = min(`max_theta_deg`, the camera's field),
+    at most the distance to the frame's farthest corner (nothing lies beyond it)."""
+    theta = math.radians(min(max_theta_deg, camera.theta_max_deg))
+    focal = (camera.focal_px[0] + camera.focal_px[1]) / 2
+    ring = focal * float(theta_to_radius(np.asarray([theta]), camera.kb)[0])
+    width, height = camera.image_size
+    u0, v0 = camera.principal_point
+    corner = max(math.hypot(u - u0, v - v0) for u in (-0.5, width - 0.5) for v in (-0.5, height - 0.5))
+    return min(ring, corner)
+
+
+def polar_grid(info: ModelInfo, camera: FisheyeCamera) -> PolarGrid:
+    """The strip of a polar model for frames of `camera` (already scaled to the frame)."""
+    if info.polar is None:
+        raise ValueError(f"model {info.name} has the {info.view} view, not polar")
+    return PolarGrid(principal_point=(float(camera.principal_point[0]), float(camera.principal_point[1])),
+                     radius_px=polar_radius_px(camera, info.polar.max_theta_deg),
+                     height=info.input_size, width=info.polar.width, overlap=info.polar.overlap)
+
+
+def min_decoded_side(info: ModelInfo, camera: FisheyeCamera) -> int:
+    """The smallest long side (px) a reduced decode of `camera`'s frame may have for this model:
+    the letterbox's side, or for a polar strip one frame pixel per strip row along the radius."""
+    if info.polar is None:
+        return info.input_size
+    grid = polar_grid(info, camera)
+    return math.ceil(max(camera.image_size) * grid.height / grid.radius_px)
+
+
+@functools.lru_cache(maxsize=32)
+def _cached_maps(grid: PolarGrid, scale_xy: tuple[float, float]
+                 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    return grid.sampling_maps(scale_xy)
+
+
+def prepare_input(info: ModelInfo, rgb: NDArray[np.uint8], camera: FisheyeCamera
+                  ) -> tuple[NDArray[np.uint8], InputMapping]:
+    """A frame of `camera` (scaled to the frame's full size), decoded as `rgb` (h, w, 3) at full or
+    reduced scale -> the model's input (H, W, 3) uint8 and the mapping of its px to the frame's."""
+    frame_wh = camera.image_size
+    decoded_wh = (rgb.shape[1], rgb.shape[0])
+    if info.polar is None:
+        letterbox = Letterbox.fit(frame_wh, info.input_size)
+        # A reduced decode keeps the letterbox of the full frame: its pixels map the same way.
+        image = dataclasses.replace(letterbox, frame_wh=decoded_wh).apply(rgb, info.pad_value)
+        return image, FisheyeInput(letterbox)
+    grid = polar_grid(info, camera)
+    scale_xy = (decoded_wh[0] / frame_wh[0], decoded_wh[1] / frame_wh[1])
+    map_u, map_v = _cached_maps(grid, scale_xy)
+    return unwrap_with_maps(rgb, map_u, map_v, info.pad_value), PolarInput(grid)

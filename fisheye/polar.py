@@ -1,0 +1,184 @@
+"""The polar unwrap of a fisheye frame: angle across, radius up, the principal point at the bottom.
+
+In the unwrapped strip a person standing on the floor is upright (feet towards the principal point,
+which is the bottom edge; head towards the rim, the top edge), a radius-aligned box is an
+axis-aligned box [x1, x2] × [y1, y2], and a pretrained upright detector can read it.
+
+Strip pixels (`x` right, `y` down, centres at integers) map to frame pixels as
+
+    ψ(x) = ψ0 + 2π·(x + 0.5) / width                      (screen angle atan2(v − v0, u − u0))
+    ρ(y) = radius_px · (1 − (y + 0.5) / height)            (distance from the principal point)
+    u = u0 + ρ·cos ψ,   v = v0 + ρ·sin ψ
+
+so the top edge (y = −0.5) is the outer radius and the bottom edge (y = height − 0.5) the
+principal point. `width` columns cover 360°; a strip may carry `overlap` more columns that repeat
+its first ones, so that nobody standing at the seam is cut in two.
+
+A strip box [x1, y1, x2, y2] is the ring segment ψ ∈ [ψ(x1), ψ(x2)], ρ ∈ [ρ(y2), ρ(y1)]; in the frame
+it becomes the radius-aligned box that bounds that segment (`polar_to_radius_aligned`), and
+`radius_aligned_to_polar` is its exact inverse for boxes that leave the principal point outside
+(training labels are built with it, so a model is read back the way its labels were made).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fisheye.arrays import as_points
+
+FloatArray = NDArray[np.float64]
+
+TWO_PI = 2.0 * math.pi
+
+
+@dataclass(frozen=True)
+class PolarGrid:
+    """How a frame is unwrapped: about `principal_point` (frame px), out to `radius_px`, into a strip
+    of `height` rows and `width` columns per turn, plus `overlap` columns that repeat the first ones."""
+
+    principal_point: tuple[float, float]
+    radius_px: float
+    height: int
+    width: int
+    overlap: int = 0
+    start_rad: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.height < 1 or self.width < 1 or self.overlap < 0 or self.overlap > self.width:
+            raise ValueError(f"strip of {self.height} rows, {self.width} columns and {self.overlap} "
+                             "overlap columns: rows and columns must be positive, 0 ≤ overlap ≤ width")
+        if not (math.isfinite(self.radius_px) and self.radius_px > 0):
+            raise ValueError(f"radius_px must be positive, got {self.radius_px}")
+
+    @property
+    def strip_wh(self) -> tuple[int, int]:
+        """(width, height) of the strip the model sees, overlap included."""
+        return self.width + self.overlap, self.height
+
+    @property
+    def px_per_rad(self) -> float:
+        """Strip columns per radian of angle."""
+        return self.width / TWO_PI
+
+    @property
+    def px_per_radius_px(self) -> float:
+        """Strip rows per frame pixel of radius."""
+        return self.height / self.radius_px
+
+    # ----- 1-D maps
+
+    def column_to_angle_rad(self, x: ArrayLike) -> FloatArray:
+        return self.start_rad + TWO_PI * (np.asarray(x, dtype=np.float64) + 0.5) / self.width
+
+    def angle_to_column(self, angle_rad: ArrayLike) -> FloatArray:
+        """Angles -> columns in [−0.5, width − 0.5) (the first turn; add `width` for the overlap)."""
+        turns = (np.asarray(angle_rad, dtype=np.float64) - self.start_rad) / TWO_PI
+        return (turns - np.floor(turns)) * self.width - 0.5
+
+    def row_to_radius_px(self, y: ArrayLike) -> FloatArray:
+        return self.radius_px * (1.0 - (np.asarray(y, dtype=np.float64) + 0.5) / self.height)
+
+    def radius_to_row(self, radius_px: ArrayLike) -> FloatArray:
+        return (1.0 - np.asarray(radius_px, dtype=np.float64) / self.radius_px) * self.height - 0.5
+
+    # ----- points
+
+    def strip_to_frame(self, xy_px: ArrayLike) -> FloatArray:
+        """(N, 2) strip px -> (N, 2) frame px."""
+        xy = as_points(xy_px, 2, "xy_px")
+        angle = self.column_to_angle_rad(xy[:, 0])
+        radius = self.row_to_radius_px(xy[:, 1])
+        u0, v0 = self.principal_point
+        return np.stack([u0 + radius * np.cos(angle), v0 + radius * np.sin(angle)], axis=1)
+
+    def frame_to_strip(self, uv_px: ArrayLike) -> FloatArray:
+        """(N, 2) frame px -> (N, 2) strip px, columns in the first turn [−0.5, width − 0.5)."""
+        uv = as_points(uv_px, 2, "uv_px")
+        offset = uv - np.asarray(self.principal_point, dtype=np.float64)
+        angle = np.arctan2(offset[:, 1], offset[:, 0])
+        radius = np.hypot(offset[:, 0], offset[:, 1])
+        return np.stack([self.angle_to_column(angle), self.radius_to_row(radius)], axis=1)
+
+    def sampling_maps(self, scale_xy: tuple[float, float] = (1.0, 1.0)
+                      ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        """`cv2.remap` maps (height, width + overlap) float32 of an image that is the frame resized
+        by `scale_xy` (its pixel u' = (u + 0.5)·s − 0.5, as cv2.resize and reduced JPEG decodes)."""
+        strip_w, strip_h = self.strip_wh
+        columns, rows = np.meshgrid(np.arange(strip_w, dtype=np.float64),
+                                    np.arange(strip_h, dtype=np.float64))
+        uv = self.strip_to_frame(np.stack([columns.ravel(), rows.ravel()], axis=1))
+        map_u = (uv[:, 0] + 0.5) * scale_xy[0] - 0.5
+        map_v = (uv[:, 1] + 0.5) * scale_xy[1] - 0.5
+        return (map_u.reshape(strip_h, strip_w).astype(np.float32),
+                map_v.reshape(strip_h, strip_w).astype(np.float32))
+
+    def unwrap(self, image: NDArray[np.uint8], scale_xy: tuple[float, float] = (1.0, 1.0),
+               border_value: int = 0) -> NDArray[np.uint8]:
+        """(H, W, C) uint8 frame (resized by `scale_xy`) -> (height, width + overlap, C) strip."""
+        map_u, map_v = self.sampling_maps(scale_xy)
+        return unwrap_with_maps(image, map_u, map_v, border_value)
+
+    # ----- boxes
+
+    def polar_to_radius_aligned(self, xyxy: ArrayLike) -> FloatArray:
+        """(N, 4) strip boxes `x1, y1, x2, y2` -> (N, 4) radius-aligned `cxcywh` frame px: the box
+        whose sides bound the ring segment the strip box covers."""
+        boxes = as_points(xyxy, 4, "xyxy")
+        angle_1 = self.column_to_angle_rad(boxes[:, 0])
+        angle_2 = self.column_to_angle_rad(boxes[:, 2])
+        outer = np.maximum(self.row_to_radius_px(boxes[:, 1]), 0.0)
+        inner = np.clip(self.row_to_radius_px(boxes[:, 3]), 0.0, None)
+        inner = np.minimum(inner, outer)
+        direction = (angle_1 + angle_2) / 2
+        half_angle = np.clip(np.abs(angle_2 - angle_1) / 2, 0.0, math.pi)
+        cos_half, sin_half = np.cos(half_angle), np.sin(half_angle)
+        # Along the ray: from the nearer of the inner corners (or the far side of a wide segment)
+        # out to the middle of the outer arc; across it: the outer arc's chord, or its diameter.
+        near = np.minimum(inner * cos_half, outer * cos_half)
+        far = outer
+        half_width = np.where(half_angle <= math.pi / 2, outer * sin_half, outer)
+        middle = (near + far) / 2
+        u0, v0 = self.principal_point
+        cx = u0 + middle * np.cos(direction)
+        cy = v0 + middle * np.sin(direction)
+        return np.stack([cx, cy, 2 * half_width, far - near], axis=1)
+
+    def radius_aligned_to_polar(self, cxcywh: ArrayLike) -> FloatArray:
+        """(N, 4) radius-aligned boxes -> (N, 4) strip boxes `x1, y1, x2, y2`, the first turn's
+        columns (x1 may be below −0.5 or x2 past the turn for a box across the seam).
+
+        The exact inverse of `polar_to_radius_aligned` for a box that leaves the principal point
+        outside; a box over the principal point becomes the full turn down to the bottom row.
+        """
+        boxes = as_points(cxcywh, 4, "cxcywh")
+        offset = boxes[:, :2] - np.asarray(self.principal_point, dtype=np.float64)
+        distance = np.hypot(offset[:, 0], offset[:, 1])
+        direction = np.arctan2(offset[:, 1], offset[:, 0])
+        half_w, half_h = boxes[:, 2] / 2, boxes[:, 3] / 2
+        outer = distance + half_h
+        near = distance - half_h
+        with np.errstate(invalid="ignore", divide="ignore"):
+            half_angle = np.arcsin(np.clip(half_w / np.where(outer > 0, outer, 1.0), 0.0, 1.0))
+            inner = np.where(near > 0, near / np.cos(half_angle), 0.0)
+        over_centre = near <= 0
+        half_angle = np.where(over_centre, math.pi, half_angle)
+        centre_column = self.angle_to_column(direction)
+        half_columns = half_angle * self.px_per_rad
+        x1 = np.where(over_centre, -0.5, centre_column - half_columns)
+        x2 = np.where(over_centre, self.width - 0.5, centre_column + half_columns)
+        return np.stack([x1, self.radius_to_row(outer), x2, self.radius_to_row(inner)], axis=1)
+
+
+def unwrap_with_maps(image: NDArray[np.uint8], map_u: NDArray[np.float32], map_v: NDArray[np.float32],
+                     border_value: int = 0) -> NDArray[np.uint8]:
+    """Sample `image` at precomputed `sampling_maps` (bilinear; outside the image: `border_value`)."""
+    import cv2
+
+    channels = 1 if image.ndim == 2 else image.shape[2]
+    strip = cv2.remap(image, map_u, map_v, interpolation=cv2.INTER_LINEAR,
+                      borderMode=cv2.BORDER_CONSTANT, borderValue=(border_value,) * channels)
+    return np.asarray(strip, dtype=np.uint8)
