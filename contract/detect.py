@@ -10,12 +10,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from contract.model import OnnxModel, RawOutputs
+from contract.metadata import ModelInfo
+from contract.model import RawOutputs
 from contract.views import InputMapping, min_decoded_side, prepare_input
 from fisheye import FisheyeCamera, rotated_nms
 
@@ -74,10 +76,19 @@ def reduce_like_decode(rgb: NDArray[np.uint8], min_long_side: int) -> NDArray[np
     return rgb
 
 
+class ContractModel(Protocol):
+    """What runs a model of the contract: an `OnnxModel`, or a torch module wrapped alike."""
+
+    @property
+    def info(self) -> ModelInfo: ...
+
+    def run(self, image: NDArray[np.uint8]) -> RawOutputs: ...
+
+
 class ModelRunner:
     """Decoded full-size frames with their cameras -> FrameDetections, as the service computes them."""
 
-    def __init__(self, model: OnnxModel, nms_iou: float | None = 0.6, max_detections: int = 300) -> None:
+    def __init__(self, model: ContractModel, nms_iou: float | None = 0.6, max_detections: int = 300) -> None:
         self.model = model
         self.nms_iou = nms_iou
         self.max_detections = max_detections

@@ -1,9 +1,10 @@
 """`fishloc eval`: a checkpoint or ONNX model on an annotated dataset -> metrics JSON and plots.
 
-Both kinds of model go through the same letterbox and post-processing as the service
-(`exporter.onnx_runner`): frames are letterboxed to the model input, boxes come back to frame
-pixels. Metrics are those of `detector.metrics`, overall and per split (seen/unseen) when the data
-has more than one.
+Both kinds of model go through the service's own pre- and post-processing (`contract`): the frame
+reduced as the service's JPEG decode would, the model's view of it (letterbox or polar unwrap),
+boxes back to frame pixels, rotated NMS. Frames without a calibration (CEPDOF, WEPDTOF) are run with
+the assumed camera of DESIGN.md. Metrics are those of `detector.metrics`, overall and per split
+(seen/unseen) when the data has more than one.
 """
 
 from __future__ import annotations
@@ -20,16 +21,25 @@ from typing import Any, Protocol
 import numpy as np
 import torch
 from numpy.typing import NDArray
+from torch import nn
 from tqdm import tqdm
 
+from contract import (
+    FrameDetections,
+    ModelError,
+    ModelInfo,
+    ModelRunner,
+    OnnxModel,
+    RawOutputs,
+    SessionThreads,
+)
 from detector.checkpoint import CheckpointError, load_checkpoint
-from detector.data.dataset import PAD_VALUE, load_rgb
+from detector.data.dataset import load_rgb
 from detector.data.readers import DatasetFormatError, FrameAnnotations, read_dataset
+from detector.graph import contract_info, contract_module
 from detector.metrics import EvalFrame, compute_metrics, localisation_points, pr_curve
 from detector.plots import plot_pe_by_distance, plot_pr_curve
-from exporter.graph import ContractModel
-from exporter.onnx_runner import FrameDetections, ModelFormatError, OnnxDetector, postprocess
-from fisheye import Letterbox
+from fisheye import FisheyeCamera, camera_from_dict
 
 EVAL_MIN_SCORE = 0.01  # detections kept for AP (the PR curve runs down to here)
 
@@ -37,46 +47,63 @@ EVAL_MIN_SCORE = 0.01  # detections kept for AP (the PR curve runs down to here)
 class Predictor(Protocol):
     default_min_score: float
 
-    def detect(self, frames_rgb: Sequence[NDArray[np.uint8]], min_score: float) -> list[FrameDetections]:
+    def detect(self, frames_rgb: Sequence[NDArray[np.uint8]], cameras: Sequence[FisheyeCamera],
+               min_score: float) -> list[FrameDetections]:
         ...
 
 
-class OnnxPredictor:
-    def __init__(self, path: str | Path, threads: int | None = None) -> None:
-        self.detector = OnnxDetector(path, threads)
-        self.default_min_score = self.detector.metadata.default_min_score
+class TorchContract:
+    """A torch module of the ONNX contract with the ModelInfo its export would carry: runs like an
+    `OnnxModel` (`info`, `run`), so `contract.ModelRunner` pre- and post-processes it alike."""
 
-    def detect(self, frames_rgb: Sequence[NDArray[np.uint8]], min_score: float) -> list[FrameDetections]:
-        return self.detector.detect(frames_rgb, min_score)
+    def __init__(self, module: nn.Module, info: ModelInfo) -> None:
+        self.module = module.eval()
+        self.info = info
 
-
-class TorchPredictor:
-    """A torch model through the ONNX contract's module, with the runtime's pre/post-processing."""
-
-    def __init__(self, model: ContractModel, default_min_score: float) -> None:
-        self.model = model.eval()
-        self.default_min_score = default_min_score
-
-    def detect(self, frames_rgb: Sequence[NDArray[np.uint8]], min_score: float) -> list[FrameDetections]:
-        if not frames_rgb:
-            return []
-        size = self.model.input_size
-        letterboxes = [Letterbox.fit((f.shape[1], f.shape[0]), size) for f in frames_rgb]
-        inputs = np.stack([lb.apply(f, PAD_VALUE) for lb, f in zip(letterboxes, frames_rgb, strict=True)])
-        device = next(self.model.parameters()).device
+    def run(self, image: NDArray[np.uint8]) -> RawOutputs:
+        device = next(self.module.parameters()).device
         with torch.no_grad():
-            boxes, scores = self.model(torch.from_numpy(inputs).to(device))
-        return [postprocess(boxes[i].cpu().numpy(), scores[i].cpu().numpy(), lb, min_score)
-                for i, lb in enumerate(letterboxes)]
+            outputs = self.module(torch.from_numpy(np.ascontiguousarray(image[None])).to(device))
+        arrays = [o[0].float().cpu().numpy() for o in outputs]
+        return RawOutputs(arrays[0], arrays[1], arrays[2] if len(arrays) > 2 else None)
 
 
-def load_predictor(path: str | Path, device: str = "cpu") -> Predictor:
+class RunnerPredictor:
+    """Any contract model (ONNX session or torch module) behind `contract.ModelRunner`."""
+
+    def __init__(self, runner: ModelRunner) -> None:
+        self.runner = runner
+        self.default_min_score = runner.default_min_score
+
+    def detect(self, frames_rgb: Sequence[NDArray[np.uint8]], cameras: Sequence[FisheyeCamera],
+               min_score: float) -> list[FrameDetections]:
+        return self.runner.detect(frames_rgb, cameras, min_score)
+
+
+def torch_predictor(module: nn.Module, info: ModelInfo) -> RunnerPredictor:
+    return RunnerPredictor(ModelRunner(TorchContract(module, info)))
+
+
+def load_predictor(path: str | Path, device: str = "cpu", threads: int | None = None) -> Predictor:
     """An ONNX file (by its .onnx suffix) or a training checkpoint."""
     if Path(path).suffix.lower() == ".onnx":
-        return OnnxPredictor(path)
+        model = OnnxModel(path, SessionThreads(intra_op=threads or torch.get_num_threads()))
+        return RunnerPredictor(ModelRunner(model))
     checkpoint = load_checkpoint(path)
-    model = ContractModel(checkpoint.build(path)).to(device)
-    return TorchPredictor(model, checkpoint.info.default_min_score)
+    return torch_predictor(contract_module(checkpoint, str(path)).to(device), contract_info(checkpoint))
+
+
+def assumed_camera(width: int, height: int) -> FisheyeCamera:
+    """DESIGN.md's camera for frames without a calibration: an ideal equidistant lens whose 180°
+    image circle fills the frame's shorter side, centred, 3 m up."""
+    focal = (min(width, height) / 2) / (math.pi / 2)
+    return camera_from_dict({"id": "assumed", "altitude_m": 3.0, "image_size": [width, height],
+                             "principal_point": [(width - 1) / 2, (height - 1) / 2],
+                             "focal_px": [focal, focal], "kb": [1.0]})
+
+
+def frame_camera(frame: FrameAnnotations) -> FisheyeCamera:
+    return frame.camera if frame.camera is not None else assumed_camera(frame.width, frame.height)
 
 
 @dataclass
@@ -92,7 +119,8 @@ def eval_frames(predictor: Predictor, frames: Sequence[FrameAnnotations], batch_
     batches = range(0, len(frames), batch_size)
     for start in tqdm(batches, desc="eval", unit="batch", disable=not progress):
         chunk = frames[start:start + batch_size]
-        found = predictor.detect([load_rgb(f) for f in chunk], EVAL_MIN_SCORE)
+        found = predictor.detect([load_rgb(f) for f in chunk], [frame_camera(f) for f in chunk],
+                                 EVAL_MIN_SCORE)
         for frame, detections in zip(chunk, found, strict=True):
             result.append(EvalFrame(
                 gt_boxes=frame.boxes_cxcywh, gt_locations_m=frame.locations_m,
@@ -152,7 +180,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         predictor = load_predictor(args.model)
         frames = read_dataset(args.data)
-    except (CheckpointError, ModelFormatError, DatasetFormatError) as error:
+    except (CheckpointError, ModelError, DatasetFormatError) as error:
         print(f"fishloc eval: {error}", file=sys.stderr)
         return 2
     if args.limit is not None:

@@ -23,12 +23,12 @@ from tqdm import tqdm
 from detector.checkpoint import Checkpoint, ModelInfo, load_checkpoint, save_checkpoint
 from detector.data.dataset import AugmentConfig, DetectionDataset, collate
 from detector.data.readers import FrameAnnotations
-from detector.evaluate import TorchPredictor, eval_frames, json_safe, summarise
+from detector.evaluate import eval_frames, json_safe, summarise, torch_predictor
+from detector.graph import ContractModel, centernet_info
 from detector.losses import DetectionLoss, LossConfig
 from detector.metrics import pr_curve
 from detector.model import DetectorConfig, FishLocNet, build_model
 from detector.plots import plot_training
-from exporter.graph import ContractModel
 
 LOG_FILE = "log.jsonl"
 LAST = "last.pt"
@@ -182,7 +182,7 @@ class Trainer:
         if not self.val_frames:
             return {}
         self.model.eval()
-        predictor = TorchPredictor(ContractModel(self.model), self.info.default_min_score)
+        predictor = torch_predictor(ContractModel(self.model), centernet_info(self.model.config, self.info))
         frames = eval_frames(predictor, self.val_frames)
         threshold = best_f1_threshold(frames)
         metrics = summarise(frames, threshold)

@@ -1,5 +1,5 @@
 """Exporter: trained checkpoint -> ONNX model of the FishLoc contract, parity check, INT8 quantisation.
 
-`exporter.onnx_runner` is the torch-free runtime side (letterbox, run, map boxes back to the frame)
-that evaluation and the service share.
+The exported graph is read back through `contract`, the torch-free reader the service and
+evaluation share, so the parity check runs the model exactly as it is served.
 """

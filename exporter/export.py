@@ -24,10 +24,11 @@ import numpy as np
 import onnx
 import torch
 from numpy.typing import NDArray
+from torch import nn
 
+from contract import ModelInfo, OnnxModel, SessionThreads, metadata_props
 from detector.checkpoint import Checkpoint, CheckpointError, load_checkpoint
-from exporter.graph import ContractModel
-from exporter.onnx_runner import BOX_FORMAT, OnnxDetector
+from detector.graph import contract_info, contract_module
 from exporter.parity import ParityReport, check_parity, synthetic_parity_frames
 from exporter.quantize import check_integer_convolutions, quantize_int8
 
@@ -47,39 +48,29 @@ class ExportReport:
     integer_ops: dict[str, int] | None = None
 
 
-def _metadata(checkpoint: Checkpoint, input_size: int) -> dict[str, str]:
-    info = checkpoint.info
-    return {
-        "fishloc.input_size": str(input_size),
-        "fishloc.pad_value": str(PAD_VALUE),
-        "fishloc.box_format": BOX_FORMAT,
-        "fishloc.model_name": checkpoint.config.model_name,
-        "fishloc.model_version": info.model_version,
-        "fishloc.trained_on": info.trained_on,
-        "fishloc.default_min_score": f"{info.default_min_score:g}",
-    }
-
-
 def contract_model(checkpoint: Checkpoint, input_size: int | None = None,
-                   source: str = "<memory>") -> ContractModel:
-    """The network of `checkpoint` wrapped to the ONNX contract, at `input_size` (default: trained)."""
+                   source: str = "<memory>") -> tuple[nn.Module, ModelInfo]:
+    """`checkpoint`'s network wrapped to the ONNX contract, at `input_size` (default: trained; a
+    letterbox side or a strip height), and the metadata its export carries."""
+    if input_size is not None and input_size % 32 != 0:
+        raise ValueError(f"--input-size must be a multiple of 32, got {input_size}")
     if input_size is not None and input_size != checkpoint.config.input_size:
-        if input_size % 32 != 0:
-            raise ValueError(f"--input-size must be a multiple of 32, got {input_size}")
         checkpoint = replace(checkpoint, config=replace(checkpoint.config, input_size=input_size))
-    return ContractModel(checkpoint.build(source)).eval()
+    return contract_module(checkpoint, source), contract_info(checkpoint)
 
 
-def _torch_to_onnx(model: ContractModel, path: Path, opset: int) -> None:
-    size = model.input_size
-    example = torch.zeros((2, size, size, 3), dtype=torch.uint8)
+def _torch_to_onnx(model: nn.Module, info: ModelInfo, path: Path, opset: int) -> None:
+    width, height = info.input_wh
+    example = torch.zeros((2, height, width, 3), dtype=torch.uint8)
+    with torch.no_grad():
+        outputs = ["boxes", "scores", "foot"][:len(model(example))]
     batch = torch.export.Dim("batch", min=1, max=1024)
     # The exporter prints progress and torch-internal deprecation notices; keep the command's output ours.
     with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()):
         warnings.simplefilter("ignore")
         logging.getLogger("torch.onnx").setLevel(logging.ERROR)
         torch.onnx.export(model, (example,), str(path), input_names=["image"],
-                          output_names=["boxes", "scores"], opset_version=opset, dynamo=True,
+                          output_names=outputs, opset_version=opset, dynamo=True,
                           dynamic_shapes={"image": {0: batch}}, external_data=False, verbose=False)
 
 
@@ -122,16 +113,18 @@ def export_onnx(checkpoint: Checkpoint, output: str | Path, input_size: int | No
     With `int8`, the verified float graph is quantised and written to `output` instead; the float
     parity report still describes the graph before quantisation.
     """
-    model = contract_model(checkpoint, input_size)
-    size = model.input_size
+    model, info = contract_model(checkpoint, input_size)
+    width, size = info.input_wh
     target = Path(output)
     target.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as folder:
         float_path = Path(folder) / "float.onnx" if int8 else target
-        _torch_to_onnx(model, float_path, opset)
-        _write_metadata(float_path, _metadata(checkpoint, size))
-        frames = parity_frames if parity_frames is not None else synthetic_parity_frames(size)
-        parity = check_parity(model, OnnxDetector(float_path), frames, checkpoint.info.default_min_score)
+        _torch_to_onnx(model, info, float_path, opset)
+        _write_metadata(float_path, metadata_props(info))
+        frames = (parity_frames if parity_frames is not None
+                  else synthetic_parity_frames(size, width=width))
+        parity = check_parity(model, OnnxModel(float_path, SessionThreads(intra_op=1)), frames,
+                              info.default_min_score)
         integer_ops = None
         if int8:
             if calibration_frames is None:
@@ -139,7 +132,8 @@ def export_onnx(checkpoint: Checkpoint, output: str | Path, input_size: int | No
             quantize_int8(float_path, target, calibration_frames)
             onnx.checker.check_model(onnx.load(str(target)), full_check=True)
             integer_ops = check_integer_convolutions(target)
-    return ExportReport(str(target), size, opset, model.max_detections, parity, int8, integer_ops)
+    return ExportReport(str(target), size, opset, int(getattr(model, "max_detections", 0)), parity, int8,
+                        integer_ops)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -15,24 +15,25 @@ from pathlib import Path
 
 import numpy as np
 
-from exporter.onnx_runner import OnnxDetector
+from contract import OnnxModel, SessionThreads
 from exporter.parity import synthetic_parity_frames
 
 
 def measure_latency_ms(model: str | Path, threads: int, runs: int, warmup: int = 10) -> dict[str, float]:
-    detector = OnnxDetector(model, threads=threads)
-    frame = synthetic_parity_frames(detector.input_size, count=1, seed=11)
+    onnx_model = OnnxModel(model, SessionThreads(intra_op=threads))
+    width, height = onnx_model.info.input_wh
+    frame = synthetic_parity_frames(height, count=1, seed=11, width=width)
     for _ in range(warmup):
-        detector.infer(frame)
+        onnx_model.run_batch(frame)
     samples = []
     for _ in range(runs):
         started = time.perf_counter()
-        detector.infer(frame)
+        onnx_model.run_batch(frame)
         samples.append((time.perf_counter() - started) * 1000.0)
     values = np.asarray(samples)
     return {"p50_ms": float(np.percentile(values, 50)), "p95_ms": float(np.percentile(values, 95)),
             "mean_ms": float(values.mean()), "runs": float(runs), "threads": float(threads),
-            "input_size": float(detector.input_size)}
+            "input_size": float(height)}
 
 
 def main() -> None:

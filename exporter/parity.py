@@ -19,7 +19,7 @@ import torch
 from numpy.typing import NDArray
 from torch import nn
 
-from exporter.onnx_runner import OnnxDetector
+from contract import OnnxModel
 
 SCORE_ATOL = 1e-4
 BOX_ATOL_PX = 1e-2
@@ -58,19 +58,22 @@ def _worst_match(boxes_a: NDArray[np.float32], scores_a: NDArray[np.float32],
     return float(score_error[rows, best].max()), float(box_error[rows, best].max())
 
 
-def synthetic_parity_frames(input_size: int, count: int = 4, seed: int = 0) -> NDArray[np.uint8]:
-    """(count, S, S, 3) uint8 frames: a lit disc with blobs of several sizes (no two alike)."""
+def synthetic_parity_frames(input_size: int, count: int = 4, seed: int = 0,
+                            width: int | None = None) -> NDArray[np.uint8]:
+    """(count, S, W, 3) uint8 frames (W = S unless given): a lit disc with blobs of several sizes
+    (no two alike)."""
     import cv2
 
     rng = np.random.default_rng(seed)
-    frames = np.zeros((count, input_size, input_size, 3), dtype=np.uint8)
-    centre = input_size // 2
+    frame_w = input_size if width is None else width
+    frames = np.zeros((count, input_size, frame_w, 3), dtype=np.uint8)
+    centre = (frame_w // 2, input_size // 2)
     for frame in frames:
-        cv2.circle(frame, (centre, centre), input_size // 2 - 2,
+        cv2.circle(frame, centre, input_size // 2 - 2,
                    tuple(int(c) for c in rng.integers(60, 160, 3)), -1)
-        for _ in range(12):
+        for _ in range(12 * frame_w // input_size):
             axes = (int(rng.integers(2, input_size // 12)), int(rng.integers(2, input_size // 8)))
-            cv2.ellipse(frame, (int(rng.integers(0, input_size)), int(rng.integers(0, input_size))),
+            cv2.ellipse(frame, (int(rng.integers(0, frame_w)), int(rng.integers(0, input_size))),
                         axes, float(rng.uniform(0, 180)), 0, 360,
                         tuple(int(c) for c in rng.integers(0, 256, 3)), -1)
         noise = rng.integers(-12, 13, frame.shape)
@@ -78,15 +81,18 @@ def synthetic_parity_frames(input_size: int, count: int = 4, seed: int = 0) -> N
     return frames
 
 
-def check_parity(torch_model: nn.Module, detector: OnnxDetector, frames: NDArray[np.uint8],
+def check_parity(torch_model: nn.Module, model: OnnxModel, frames: NDArray[np.uint8],
                  threshold: float, score_atol: float = SCORE_ATOL,
                  box_atol_px: float = BOX_ATOL_PX) -> ParityReport:
-    """Run `frames` (N, S, S, 3) uint8 through both; ParityError when they disagree."""
+    """Run model inputs `frames` (N, H, W, 3) uint8 through both (onnxruntime through the contract's
+    reader, as the service runs it); ParityError when they disagree."""
     with torch.no_grad():
-        torch_boxes_t, torch_scores_t = torch_model(torch.from_numpy(frames))
-    torch_boxes = torch_boxes_t.numpy()
-    torch_scores = torch_scores_t.numpy()
-    onnx_boxes, onnx_scores = detector.infer(frames)
+        torch_outputs = torch_model(torch.from_numpy(frames))
+    torch_boxes = torch_outputs[0].numpy()
+    torch_scores = torch_outputs[1].numpy()
+    raw = model.run_batch(frames)
+    onnx_boxes = np.stack([r.boxes for r in raw])
+    onnx_scores = np.stack([r.scores for r in raw])
     if onnx_boxes.shape != torch_boxes.shape or onnx_scores.shape != torch_scores.shape:
         raise ParityError(f"output shapes differ: torch {torch_boxes.shape}/{torch_scores.shape}, "
                           f"onnx {onnx_boxes.shape}/{onnx_scores.shape}")

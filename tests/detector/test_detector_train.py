@@ -8,14 +8,14 @@ from pathlib import Path
 import pytest
 import torch
 
-from detector.checkpoint import load_checkpoint, save_release
+from detector.checkpoint import ModelInfo, load_checkpoint, save_release
 from detector.data.dataset import AugmentConfig, DetectionDataset, collate
 from detector.data.readers import read_dataset
-from detector.evaluate import TorchPredictor, evaluate
+from detector.evaluate import evaluate, torch_predictor
+from detector.graph import ContractModel, centernet_info
 from detector.losses import DetectionLoss, LossConfig
 from detector.model import build_model, tiny_config
 from detector.trainer import TrainConfig, Trainer
-from exporter.graph import ContractModel
 from service.cli import main
 
 SIZE = 64
@@ -37,7 +37,8 @@ def test_tiny_model_overfits_a_handful_of_frames(toy_dataset: Callable[..., Path
         terms["total"].backward()
         optimizer.step()
     assert float(terms["heatmap"].detach()) < 0.5
-    metrics = evaluate(TorchPredictor(ContractModel(model.eval()), 0.3), frames).metrics
+    info = centernet_info(model.config, ModelInfo(default_min_score=0.3))
+    metrics = evaluate(torch_predictor(ContractModel(model.eval()), info), frames).metrics
     assert metrics["AP50"] >= 0.9
     assert metrics["recall"] >= 0.85
     # One pixel of this 96 px toy lens is ~0.4 m five metres out; the foot point must beat the centre.

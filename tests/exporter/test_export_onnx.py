@@ -7,13 +7,26 @@ import onnx
 import pytest
 import torch
 
+from contract import FisheyeInput, OnnxModel, RawOutputs, SessionThreads, select_detections
 from detector.checkpoint import Checkpoint, CheckpointError, ModelInfo, load_checkpoint, save_checkpoint
 from detector.model import build_model, tiny_config
 from exporter.export import contract_model, export_onnx
-from exporter.onnx_runner import REQUIRED_METADATA, OnnxDetector, postprocess
 from exporter.parity import check_parity, synthetic_parity_frames
 from fisheye import Letterbox
 from service.cli import main
+
+REQUIRED_METADATA = ("fishloc.view", "fishloc.input_size", "fishloc.pad_value", "fishloc.box_format",
+                     "fishloc.model_name", "fishloc.model_version", "fishloc.trained_on",
+                     "fishloc.default_min_score")
+
+
+def _onnx(path: Path) -> OnnxModel:
+    return OnnxModel(path, SessionThreads(intra_op=1))
+
+
+def _infer(model: OnnxModel, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    raw = model.run_batch(frames)
+    return np.stack([r.boxes for r in raw]), np.stack([r.scores for r in raw])
 
 SIZE = 64
 
@@ -50,7 +63,7 @@ def test_contract_inputs_outputs_and_metadata(exported: tuple[Checkpoint, Path, 
     props = {p.key: p.value for p in proto.metadata_props}
     assert set(REQUIRED_METADATA) <= set(props)
     assert props["fishloc.input_size"] == str(SIZE)
-    assert props["fishloc.box_format"] == "cxcywh_radius_aligned"
+    assert props["fishloc.box_format"] == "cxcywh_radius_aligned" and props["fishloc.view"] == "fisheye"
     assert props["fishloc.model_version"] == "1.2.3"
     assert props["fishloc.trained_on"] == "unit-test frames"
     (image,) = proto.graph.input
@@ -64,31 +77,32 @@ def test_contract_inputs_outputs_and_metadata(exported: tuple[Checkpoint, Path, 
 @pytest.mark.parametrize("batch", [1, 3])
 def test_parity_with_torch_and_dynamic_batch(exported: tuple[Checkpoint, Path, Path], batch: int) -> None:
     checkpoint, _, model_path = exported
-    detector = OnnxDetector(model_path)
+    detector = _onnx(model_path)
     frames = synthetic_parity_frames(SIZE, count=batch, seed=7)
-    report = check_parity(contract_model(checkpoint), detector, frames, threshold=0.3)
+    report = check_parity(contract_model(checkpoint)[0], detector, frames, threshold=0.3)
     assert report.frames == batch
-    boxes, scores = detector.infer(frames)
+    boxes, scores = _infer(detector, frames)
     K = checkpoint.config.max_detections
     assert boxes.shape == (batch, K, 4) and scores.shape == (batch, K)
     assert np.all(np.diff(scores, axis=1) <= 0)  # sorted descending
     # Each image of a batch gives what it gives alone.
-    _, single_scores = detector.infer(frames[-1:])
+    _, single_scores = _infer(detector, frames[-1:])
     np.testing.assert_allclose(single_scores[0], scores[-1], atol=1e-5)
 
 
 def test_parity_check_fails_loudly_on_a_different_model(exported: tuple[Checkpoint, Path, Path]) -> None:
     _, _, model_path = exported
-    other = contract_model(_varied_checkpoint(seed=1))
+    other, _ = contract_model(_varied_checkpoint(seed=1))
     with pytest.raises(RuntimeError, match=r"no counterpart|detections above|differ"):
-        check_parity(other, OnnxDetector(model_path), synthetic_parity_frames(SIZE, 2), threshold=0.3)
+        check_parity(other, _onnx(model_path), synthetic_parity_frames(SIZE, 2), threshold=0.3)
 
 
 def test_postprocess_maps_boxes_back_to_the_frame() -> None:
     letterbox = Letterbox.fit((200, 100), 64)  # 2x wider than high -> scale 0.32, pad rows
     boxes = np.array([[31.5, 31.5, 4.0, 8.0], [10.0, 20.0, 2.0, 3.0], [0.0, 0.0, 1.0, 1.0]], np.float32)
     scores = np.array([0.9, 0.5, 0.1], np.float32)
-    found = postprocess(boxes, scores, letterbox, min_score=0.3, nms_iou=None)
+    found = select_detections(RawOutputs(boxes, scores), FisheyeInput(letterbox), (99.5, 49.5),
+                              min_score=0.3, nms_iou=None)
     np.testing.assert_allclose(found.scores, [0.9, 0.5], rtol=1e-6)
     np.testing.assert_allclose(found.boxes_cxcywh[0], [99.5, 49.5, 12.5, 25.0], rtol=1e-5)
     np.testing.assert_allclose(found.principal_point, (99.5, 49.5), rtol=1e-6)
@@ -101,9 +115,9 @@ def test_int8_export_runs_integer_convolutions(tmp_path: Path) -> None:
     assert report.integer_ops is not None
     assert report.integer_ops.get("QLinearConv", 0) >= 10
     assert report.integer_ops.get("Conv", 0) == 0
-    detector = OnnxDetector(tmp_path / "int8.onnx")
-    assert detector.metadata.model_version == "1.2.3"
-    boxes, scores = detector.infer(frames[:2])
+    detector = _onnx(tmp_path / "int8.onnx")
+    assert detector.info.version == "1.2.3"
+    boxes, scores = _infer(detector, frames[:2])
     assert boxes.shape == (2, checkpoint.config.max_detections, 4) and np.all(np.isfinite(scores))
 
 

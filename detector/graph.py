@@ -1,0 +1,48 @@
+"""The module that becomes the ONNX graph: uint8 RGB images in, decoded boxes and scores out.
+
+Everything model-specific (normalisation, the network, peak extraction, top-K) lives inside, so the
+service only letterboxes frames and reads `boxes` (N, K, 4) and `scores` (N, K).
+"""
+
+from __future__ import annotations
+
+from torch import Tensor, nn
+
+from contract import BOX_FORMATS, VIEW_FISHEYE, ModelInfo
+from detector.checkpoint import Checkpoint
+from detector.checkpoint import ModelInfo as CheckpointInfo
+from detector.data.dataset import PAD_VALUE
+from detector.decode import decode
+from detector.model import DetectorConfig, FishLocNet
+
+
+class ContractModel(nn.Module):
+    """(N, S, S, 3) uint8 RGB -> boxes (N, K, 4) float32 input px `cxcywh`, scores (N, K) float32."""
+
+    def __init__(self, net: FishLocNet) -> None:
+        super().__init__()
+        self.net = net
+        self.input_size = net.config.input_size
+        self.max_detections = net.config.max_detections
+
+    def forward(self, image: Tensor) -> tuple[Tensor, Tensor]:
+        predictions = self.net(self.net.normalise(image))  # (N, 5, S/4, S/4)
+        return decode(predictions, self.input_size, self.max_detections)
+
+
+def centernet_info(config: DetectorConfig, info: CheckpointInfo) -> ModelInfo:
+    """The contract metadata of a CenterNet (`fisheye` view) network with `config` and `info`."""
+    return ModelInfo(name=config.model_name, version=info.model_version, view=VIEW_FISHEYE,
+                     input_size=config.input_size, pad_value=PAD_VALUE,
+                     default_min_score=info.default_min_score, trained_on=info.trained_on,
+                     box_format=BOX_FORMATS[VIEW_FISHEYE])
+
+
+def contract_info(checkpoint: Checkpoint) -> ModelInfo:
+    """The contract metadata that `checkpoint`'s export carries (and evaluation reads it by)."""
+    return centernet_info(checkpoint.config, checkpoint.info)
+
+
+def contract_module(checkpoint: Checkpoint, source: str = "<memory>") -> nn.Module:
+    """`checkpoint`'s network wrapped to the ONNX contract, in eval mode."""
+    return ContractModel(checkpoint.build(source)).eval()
