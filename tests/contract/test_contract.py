@@ -1,0 +1,96 @@
+"""The contract reader: metadata of both views, signature checks, and the polar view end to end
+through the service's pipeline with a test-double model."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from polar_double import BOX_WH, METADATA, SCORE, save_polar_double
+
+from contract import ModelError, ModelInfo, OnnxModel, PolarSpec, SessionThreads, metadata_props, parse_metadata
+from fisheye import FisheyeCamera, camera_from_dict, foot_points
+from service.pipeline import Pipeline, PipelineConfig
+
+CAMERA = {"id": "cam", "altitude_m": 3.0, "image_size": [1024, 1024], "principal_point": [511.5, 511.5],
+          "focal_px": [320.0, 320.0], "kb": [1.0]}
+
+
+def _person_frame(camera: FisheyeCamera, xy_m: tuple[float, float]) -> tuple[bytes, np.ndarray]:
+    """A dark frame with a bright disc on the floor point `xy_m`: JPEG bytes and the disc's pixel."""
+    import cv2
+
+    uv = camera.floor_to_pixels(np.array([xy_m]))[0]
+    frame = np.full((1024, 1024, 3), 30, dtype=np.uint8)
+    cv2.circle(frame, (round(uv[0]), round(uv[1])), 14, (255, 255, 255), -1)
+    ok, data = cv2.imencode(".png", frame)
+    assert ok
+    return data.tobytes(), uv
+
+
+def test_metadata_round_trip_for_both_views() -> None:
+    polar = ModelInfo(name="m", version="1", view="polar", input_size=64, pad_value=0, default_min_score=0.4,
+                      trained_on="x", box_format="xyxy_polar", licence="Apache-2.0",
+                      polar=PolarSpec(width=256, overlap=32, max_theta_deg=88.0))
+    fisheye = ModelInfo(name="m", version="1", view="fisheye", input_size=64, pad_value=0,
+                        default_min_score=0.4, trained_on="x", box_format="cxcywh_radius_aligned")
+    for info in (polar, fisheye):
+        assert parse_metadata(metadata_props(info), "test") == info
+    assert polar.input_wh == (288, 64) and fisheye.input_wh == (64, 64)
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    ({"fishloc.polar_width": None}, "fishloc.polar_width"),
+    ({"fishloc.box_format": "cxcywh_radius_aligned"}, "xyxy_polar"),
+    ({"fishloc.view": "sideways"}, "unknown view"),
+    ({"fishloc.polar_overlap": "9999"}, "overlap"),
+    ({"fishloc.input_size": None}, "fishloc.input_size"),
+])
+def test_bad_metadata_is_refused(change: dict[str, str | None], message: str) -> None:
+    props = {k: v for k, v in {**METADATA, **change}.items() if v is not None}
+    with pytest.raises(ModelError, match=message):
+        parse_metadata(props, "bad.onnx")
+
+
+def test_a_foot_output_of_the_wrong_shape_is_refused(tmp_path: Path) -> None:
+    path = save_polar_double(tmp_path / "bad_foot.onnx", bad_foot=True)
+    with pytest.raises(ModelError, match="'foot' has shape"):
+        OnnxModel(path, SessionThreads(1))
+
+
+def test_an_input_that_does_not_match_the_strip_is_refused(tmp_path: Path) -> None:
+    path = save_polar_double(tmp_path / "wide.onnx", metadata={**METADATA, "fishloc.polar_width": "512"})
+    with pytest.raises(ModelError, match="'image' has shape"):
+        OnnxModel(path, SessionThreads(1))
+
+
+@pytest.mark.parametrize("with_foot", [False, True])
+@pytest.mark.parametrize("xy_m", [(1.5, 0.8), (-2.0, -3.0), (0.4, -4.5)])
+def test_polar_pipeline_places_the_person(tmp_path: Path, with_foot: bool, xy_m: tuple[float, float]) -> None:
+    model = OnnxModel(save_polar_double(tmp_path / "polar.onnx", foot=with_foot), SessionThreads(1))
+    assert model.has_foot == with_foot and model.info.view == "polar"
+    pipeline = Pipeline(model, PipelineConfig())
+    camera = camera_from_dict(CAMERA)
+    data, uv = _person_frame(camera, xy_m)
+    result = pipeline.detect(data, camera)
+    detections = result.detections
+    assert detections.scores.tolist() == pytest.approx([SCORE], abs=1e-3)
+    box = detections.cxcywh[0]
+    pp = np.asarray(camera.principal_point)
+    # The strip box is centred on the disc, so its ring segment is too: the radius-aligned box that
+    # bounds the segment lies on the disc's ray, `BOX_WH[1]` rows long in frame px of radius.
+    grid_radius = 320 * np.pi / 2  # 90° of this equidistant lens, inside the frame's corners
+    offset, ray = box[:2] - pp, (uv - pp) / np.linalg.norm(uv - pp)
+    assert abs(ray[0] * offset[1] - ray[1] * offset[0]) < 1.0
+    assert box[3] == pytest.approx(BOX_WH[1] * grid_radius / 64, rel=0.01)
+    outer = np.linalg.norm(uv - pp) + box[3] / 2  # the strip box's top row, from the disc's centre
+    assert np.dot(offset, ray) + box[3] / 2 == pytest.approx(outer, abs=2.0)  # strip centroid: ±1-2 px
+    assert box[2] == pytest.approx(2 * outer * np.sin(BOX_WH[0] / 2 * np.pi / 128), rel=0.01)
+    if with_foot:
+        # The model's foot (the strip box's bottom middle) is the middle of the segment's inner arc.
+        expected = uv - ray * box[3] / 2
+        np.testing.assert_allclose(detections.foot_px[0], expected, atol=2.0)
+    else:
+        np.testing.assert_allclose(detections.foot_px[0], foot_points(box[None], pp)[0])
+    np.testing.assert_allclose(detections.position_m[0], camera.pixels_to_floor(detections.foot_px)[0])

@@ -1,0 +1,98 @@
+"""The polar unwrap: point maps, box conversions and sampling, against independent constructions."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from fisheye import cxcywh_to_corners
+from fisheye.polar import PolarGrid
+
+GRID = PolarGrid(principal_point=(511.5, 500.0), radius_px=480.0, height=96, width=384, overlap=32)
+
+
+@pytest.mark.parametrize("points", [np.zeros((0, 2)), np.array([[0.0, 0.0], [383.0, 95.0], [100.2, 40.7]])])
+def test_strip_frame_round_trip(points: np.ndarray) -> None:
+    back = GRID.frame_to_strip(GRID.strip_to_frame(points))
+    assert back.shape == points.shape
+    np.testing.assert_allclose(back, points, atol=1e-9)
+
+
+def test_strip_rows_and_columns_by_formula() -> None:
+    # Top edge is the outer radius, bottom edge the principal point; column 0's centre is half a
+    # column past the start angle, and angles grow clockwise on screen (v down).
+    uv = GRID.strip_to_frame(np.array([[-0.5, -0.5], [0.0, 95.5]]))
+    np.testing.assert_allclose(uv[0], [511.5 + 480.0, 500.0], atol=1e-9)
+    np.testing.assert_allclose(uv[1], GRID.principal_point, atol=1e-9)
+    quarter = GRID.strip_to_frame(np.array([[384 / 4 - 0.5, -0.5]]))[0]
+    np.testing.assert_allclose(quarter, [511.5, 500.0 + 480.0], atol=1e-9)
+
+
+def test_overlap_columns_repeat_the_first_ones() -> None:
+    first = GRID.strip_to_frame(np.array([[3.0, 10.0]]))
+    repeated = GRID.strip_to_frame(np.array([[3.0 + GRID.width, 10.0]]))
+    np.testing.assert_allclose(first, repeated, atol=1e-9)
+    assert GRID.strip_wh == (416, 96)
+
+
+@pytest.mark.parametrize("boxes", [np.zeros((0, 4)), np.array([[100.0, 20.0, 130.0, 60.0],
+                                                             [10.0, 0.0, 12.0, 95.0],
+                                                             [370.0, 50.0, 400.0, 90.0]])])
+def test_polar_boxes_round_trip(boxes: np.ndarray) -> None:
+    ra = GRID.polar_to_radius_aligned(boxes)
+    back = GRID.radius_aligned_to_polar(ra)
+    assert back.shape == boxes.shape
+    # Columns come back in the first turn: compare angles modulo a turn.
+    shift = np.round((boxes[:, 0] - back[:, 0]) / GRID.width) * GRID.width
+    np.testing.assert_allclose(back + shift[:, None] * np.array([1, 0, 1, 0]), boxes, atol=1e-7)
+
+
+@settings(max_examples=200, deadline=None)
+@given(x1=st.floats(0, 380), width=st.floats(0.5, 60), y1=st.floats(-0.5, 80), height=st.floats(1, 40))
+def test_radius_aligned_box_bounds_its_ring_segment(x1: float, width: float, y1: float, height: float) -> None:
+    y2 = min(y1 + height, 95.0)
+    box = np.array([[x1, y1, x1 + width, y2]])
+    ra = GRID.polar_to_radius_aligned(box)
+    corners = cxcywh_to_corners(ra, GRID.principal_point)[0]
+    # Every point of the ring segment lies inside the radius-aligned box (a convex quad).
+    xs = np.linspace(box[0, 0], box[0, 2], 25)
+    ys = np.linspace(box[0, 1], box[0, 3], 25)
+    grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    points = GRID.strip_to_frame(grid).astype(np.float32)
+    contour = corners.astype(np.float32).reshape(-1, 1, 2)
+    inside = [cv2.pointPolygonTest(contour, (float(u), float(v)), True) for u, v in points]
+    assert min(inside) >= -1e-2
+
+
+def test_box_over_the_principal_point_becomes_the_whole_turn() -> None:
+    polar = GRID.radius_aligned_to_polar(np.array([[511.5, 505.0, 40.0, 60.0]]))[0]
+    assert polar[0] == -0.5 and polar[2] == GRID.width - 0.5
+    assert polar[3] == pytest.approx(GRID.height - 0.5)
+
+
+def test_unwrap_samples_the_frame_where_the_maps_say() -> None:
+    rng = np.random.default_rng(0)
+    frame = rng.integers(0, 255, (1000, 1024, 3), dtype=np.uint8)
+    frame = cv2.GaussianBlur(frame, (0, 0), 6)  # smooth, so bilinear sampling is near the truth
+    strip = GRID.unwrap(frame)
+    assert strip.shape == (96, 416, 3)
+    for x, y in [(5, 5), (200, 50), (400, 80)]:
+        u, v = GRID.strip_to_frame(np.array([[x, y]], dtype=np.float64))[0]
+        assert np.abs(strip[y, x].astype(int) - frame[round(v), round(u)].astype(int)).max() <= 6
+    # A frame decoded at half scale gives (nearly) the same strip.
+    half = cv2.resize(frame, (512, 500), interpolation=cv2.INTER_AREA)
+    strip_half = GRID.unwrap(half, scale_xy=(0.5, 0.5))
+    assert np.abs(strip_half.astype(int) - strip.astype(int)).mean() < 3
+
+
+@pytest.mark.parametrize("kwargs", [dict(height=0), dict(width=0), dict(overlap=-1),
+                                    dict(overlap=500), dict(radius_px=0.0), dict(radius_px=math.nan)])
+def test_invalid_grids_are_refused(kwargs: dict[str, float]) -> None:
+    base = dict(principal_point=(10.0, 10.0), radius_px=10.0, height=8, width=32, overlap=0)
+    with pytest.raises(ValueError):
+        PolarGrid(**{**base, **kwargs})  # type: ignore[arg-type]
