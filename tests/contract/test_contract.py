@@ -9,7 +9,15 @@ import numpy as np
 import pytest
 from polar_double import BOX_WH, METADATA, SCORE, save_polar_double
 
-from contract import ModelError, ModelInfo, OnnxModel, PolarSpec, SessionThreads, metadata_props, parse_metadata
+from contract import (
+    ModelError,
+    ModelInfo,
+    OnnxModel,
+    PolarSpec,
+    SessionThreads,
+    metadata_props,
+    parse_metadata,
+)
 from fisheye import FisheyeCamera, camera_from_dict, foot_points
 from service.pipeline import Pipeline, PipelineConfig
 
