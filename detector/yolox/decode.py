@@ -1,0 +1,58 @@
+"""Raw YOLOX head maps -> the released ONNX's output layout, or boxes in input pixels.
+
+Anchors are the cells of the strides 8, 16, 32 in that order, each level row-major, so a (B, 3,
+H, W) input has A = sum over s of (H / s) (W / s) of them (3549 at 416 x 416). Grids are built from
+the maps' shapes, never from a fixed input size, so this exports into an ONNX graph with dynamic
+height and width.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+from torch import Tensor
+
+from detector.yolox.head import CLASSES_START, OBJECTNESS
+from detector.yolox.network import STRIDES
+
+
+def flatten_maps(maps: Sequence[Tensor]) -> Tensor:
+    """[(B, K, h_i, w_i) per level] -> (B, A, K): the cells of each level row-major, levels in order."""
+    return torch.cat([m.flatten(2).transpose(1, 2) for m in maps], dim=1)
+
+
+def to_onnx_layout(maps: Sequence[Tensor]) -> Tensor:
+    """Raw maps -> (B, A, 5 + C) exactly as the `output` of YOLOX's ONNX export: x, y offsets
+    (cells) and log w, log h as predicted, then objectness and class probabilities (sigmoid)."""
+    flat = flatten_maps(maps)  # (B, A, 5 + C)
+    return torch.cat([flat[..., :OBJECTNESS], flat[..., OBJECTNESS:].sigmoid()], dim=-1)
+
+
+def cell_grid(height: int, width: int, like: Tensor) -> Tensor:
+    """(h * w, 2) `col, row` of every cell of an h x w map, row-major, in `like`'s dtype and device."""
+    rows = torch.arange(height, dtype=like.dtype, device=like.device)
+    cols = torch.arange(width, dtype=like.dtype, device=like.device)
+    grid_rows, grid_cols = torch.meshgrid(rows, cols, indexing="ij")  # (h, w) each
+    return torch.stack([grid_cols, grid_rows], dim=-1).reshape(-1, 2)
+
+
+def decode(maps: Sequence[Tensor], strides: Sequence[int] = STRIDES) -> Tensor:
+    """Raw maps -> (B, A, 5 + C): box `cxcywh` in input px, objectness, class probabilities.
+
+    cx, cy = (offset + cell) x stride; w, h = exp(log size) x stride (YOLOX's decode_outputs).
+    """
+    levels: list[Tensor] = []
+    for m, stride in zip(maps, strides, strict=True):
+        _, _, h, w = m.shape  # (B, 5 + C, h, w)
+        flat = m.flatten(2).transpose(1, 2)  # (B, h w, 5 + C)
+        centre_xy = (flat[..., 0:2] + cell_grid(h, w, m)) * stride  # (B, h w, 2) px
+        size_wh = flat[..., 2:4].exp() * stride  # (B, h w, 2) px
+        probabilities = flat[..., OBJECTNESS:].sigmoid()  # (B, h w, 1 + C)
+        levels.append(torch.cat([centre_xy, size_wh, probabilities], dim=-1))
+    return torch.cat(levels, dim=1)  # (B, A, 5 + C)
+
+
+def class_scores(decoded: Tensor) -> Tensor:
+    """(B, A, 5 + C) decoded (or ONNX-layout) rows -> (B, A, C) objectness x class probability."""
+    return decoded[..., OBJECTNESS:CLASSES_START] * decoded[..., CLASSES_START:]

@@ -1,0 +1,104 @@
+"""YOLOX-Nano: CSPDarknet backbone, PAFPN neck and decoupled head (after Megvii YOLOX
+`yolox/models/yolox.py`), sized by `YoloxConfig`.
+
+The network takes what the released ONNX takes: float32 (B, 3, H, W) **BGR** images with values
+0-255, no normalisation, H and W multiples of 32 (any size, not only 416). It returns the raw head
+maps of strides 8, 16, 32; `detector.yolox.decode` turns them into the ONNX's output layout or into
+boxes in pixels.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import torch
+from torch import Tensor, nn
+
+from detector.yolox.backbone import CSPDarknet
+from detector.yolox.head import YoloxHead
+from detector.yolox.neck import PAFPN
+
+STRIDES = (8, 16, 32)  # of the head levels, in output order
+PERSON = 0  # COCO class index
+
+
+@dataclass(frozen=True)
+class YoloxConfig:
+    """Hyper-parameters of a YOLOX network; the defaults are YOLOX-Nano on COCO."""
+
+    num_classes: int = 80
+    depth: float = 0.33  # multiplies the number of bottlenecks
+    width: float = 0.25  # multiplies every channel count
+    depthwise: bool = True  # depthwise-separable 3x3 convolutions outside the stem
+    prior_prob: float = 0.01  # initial objectness and class probability of an untrained head
+    model_name: str = "yolox-nano"
+
+    def __post_init__(self) -> None:
+        if self.num_classes < 1:
+            raise ValueError(f"num_classes must be at least 1, got {self.num_classes}")
+        if self.depth <= 0 or self.width <= 0:
+            raise ValueError(f"depth and width must be positive, got {self.depth}, {self.width}")
+
+    @property
+    def base_channels(self) -> int:
+        return int(64 * self.width)  # the stem's output; 16 in the Nano
+
+    @property
+    def base_depth(self) -> int:
+        return max(round(3 * self.depth), 1)  # bottlenecks of the outer backbone CSP blocks
+
+    @property
+    def neck_depth(self) -> int:
+        return round(3 * self.depth)
+
+    @property
+    def level_channels(self) -> tuple[int, int, int]:
+        return int(256 * self.width), int(512 * self.width), int(1024 * self.width)  # 64, 128, 256
+
+    @property
+    def head_width(self) -> int:
+        return int(256 * self.width)  # 64 in the Nano
+
+
+class YoloxNano(nn.Module):
+    """(B, 3, H, W) BGR 0-255 -> [(B, 5 + C, H/s, W/s) for s in 8, 16, 32], raw maps.
+
+    Channels of a map: x, y offset (cells), log w, log h (log cells), objectness logit, C class
+    logits.
+    """
+
+    def __init__(self, config: YoloxConfig | None = None) -> None:
+        super().__init__()
+        self.config = config = config or YoloxConfig()
+        self.backbone = CSPDarknet(config.base_channels, config.base_depth, config.depthwise)
+        self.neck = PAFPN(config.level_channels, config.neck_depth, config.depthwise)
+        self.head = YoloxHead(config.num_classes, config.level_channels, config.head_width,
+                              config.depthwise, config.prior_prob)
+
+    def forward(self, images: Tensor) -> list[Tensor]:
+        features = self.backbone(images)  # strides 8, 16, 32
+        fused = self.neck(features)  # same shapes
+        maps: list[Tensor] = self.head(fused)  # (B, 5 + C, H/s, W/s) per stride s
+        return maps
+
+    def to_person_only(self) -> YoloxNano:
+        """A copy that predicts COCO's person class alone (C = 1), e.g. to fine-tune and export."""
+        return keep_classes(self, [PERSON])
+
+
+def keep_classes(model: YoloxNano, classes: Sequence[int]) -> YoloxNano:
+    """A copy of `model` whose class predictions are `classes` only, in that order; every other
+    weight is copied unchanged, so the kept classes score exactly as before."""
+    count = model.config.num_classes
+    if not classes or len(set(classes)) != len(classes) or not all(0 <= c < count for c in classes):
+        raise ValueError(f"classes must be distinct indices in [0, {count}), got {list(classes)}")
+    subset = YoloxNano(replace(model.config, num_classes=len(classes)))
+    index = torch.tensor(list(classes), dtype=torch.long)
+    state = model.state_dict()
+    for key, value in state.items():
+        if key.startswith("head.cls_preds."):
+            state[key] = value.index_select(0, index.to(value.device))  # (C', ...) rows of the kept
+    subset.load_state_dict(state, strict=True)
+    device = next(model.parameters()).device
+    return subset.to(device).train(model.training)
