@@ -13,8 +13,13 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from torch import nn
 
-from detector.model import DetectorConfig, FishLocNet, build_model
+from detector.model import DetectorConfig, build_model
+from detector.yolox.polar import ARCH as POLAR_ARCH
+from detector.yolox.polar import PolarDetectorConfig, build_polar_network
+
+NetworkConfig = DetectorConfig | PolarDetectorConfig
 
 CHECKPOINT_FORMAT = "fishloc-checkpoint"
 CHECKPOINT_VERSION = 1
@@ -33,16 +38,29 @@ class ModelInfo:
     default_min_score: float = 0.3
 
 
+def build_network(config: NetworkConfig) -> nn.Module:
+    """The (untrained) network a config describes: the 0.1 CenterNet or the polar YOLOX."""
+    if isinstance(config, PolarDetectorConfig):
+        return build_polar_network(config)
+    return build_model(config)
+
+
+def config_from_dict(record: dict[str, Any]) -> NetworkConfig:
+    if record.get("arch") == POLAR_ARCH:
+        return PolarDetectorConfig.from_dict(record)
+    return DetectorConfig.from_dict(record)
+
+
 @dataclass
 class Checkpoint:
-    config: DetectorConfig
+    config: NetworkConfig
     model_state: dict[str, Any]
     info: ModelInfo = field(default_factory=ModelInfo)
     training_state: dict[str, Any] = field(default_factory=dict)
 
-    def build(self, path: str | Path = "<memory>") -> FishLocNet:
+    def build(self, path: str | Path = "<memory>") -> nn.Module:
         """The network with these weights, in eval mode."""
-        model = build_model(self.config)
+        model = build_network(self.config)
         try:
             model.load_state_dict(self.model_state, strict=True)
         except RuntimeError as error:
@@ -89,7 +107,7 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
         raise CheckpointError(f"{file} has checkpoint version {record.get('version')}, "
                               f"this FishLoc reads version {CHECKPOINT_VERSION}")
     try:
-        config = DetectorConfig.from_dict(dict(record["config"]))
+        config = config_from_dict(dict(record["config"]))
         state = dict(record["model"])
     except (KeyError, TypeError, ValueError) as error:
         raise CheckpointError(f"checkpoint {file} has a damaged config or weights: {error}") from None
@@ -98,7 +116,7 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
     return Checkpoint(config, state, info, dict(record.get("training") or {}))
 
 
-def load_model(path: str | Path) -> tuple[FishLocNet, Checkpoint]:
+def load_model(path: str | Path) -> tuple[nn.Module, Checkpoint]:
     """The network of a checkpoint file (eval mode) and the checkpoint itself."""
     checkpoint = load_checkpoint(path)
     return checkpoint.build(path), checkpoint

@@ -14,6 +14,8 @@ from detector.checkpoint import ModelInfo as CheckpointInfo
 from detector.data.dataset import PAD_VALUE
 from detector.decode import decode
 from detector.model import DetectorConfig, FishLocNet
+from detector.yolox.network import YoloxNano
+from detector.yolox.polar import PolarContract, PolarDetectorConfig
 
 
 class ContractModel(nn.Module):
@@ -40,9 +42,17 @@ def centernet_info(config: DetectorConfig, info: CheckpointInfo) -> ModelInfo:
 
 def contract_info(checkpoint: Checkpoint) -> ModelInfo:
     """The contract metadata that `checkpoint`'s export carries (and evaluation reads it by)."""
-    return centernet_info(checkpoint.config, checkpoint.info)
+    config, info = checkpoint.config, checkpoint.info
+    if isinstance(config, PolarDetectorConfig):
+        return config.model_info(info.model_version, info.trained_on, info.default_min_score)
+    return centernet_info(config, info)
 
 
 def contract_module(checkpoint: Checkpoint, source: str = "<memory>") -> nn.Module:
     """`checkpoint`'s network wrapped to the ONNX contract, in eval mode."""
-    return ContractModel(checkpoint.build(source)).eval()
+    network = checkpoint.build(source)
+    if isinstance(network, YoloxNano) and isinstance(checkpoint.config, PolarDetectorConfig):
+        return PolarContract(network, checkpoint.config.max_detections).eval()
+    if isinstance(network, FishLocNet):
+        return ContractModel(network).eval()
+    raise TypeError(f"no contract module for {type(network).__name__}")

@@ -59,6 +59,8 @@ def run(args: argparse.Namespace) -> int:
         model_config = load_checkpoint(args.init).config if args.init else MODEL_SIZES[args.model_size]()
         if args.input_size is not None:
             model_config = replace(model_config, input_size=args.input_size)
+        if not isinstance(model_config, DetectorConfig):
+            raise ValueError(f"{args.init} is a {model_config.arch} checkpoint; train it with --init-from")
     except (DatasetFormatError, CheckpointError, ValueError) as error:
         print(f"fishloc train: {error}", file=sys.stderr)
         return 2

@@ -54,7 +54,8 @@ def test_polar_boxes_round_trip(boxes: np.ndarray) -> None:
 
 @settings(max_examples=200, deadline=None)
 @given(x1=st.floats(0, 380), width=st.floats(0.5, 60), y1=st.floats(-0.5, 80), height=st.floats(1, 40))
-def test_radius_aligned_box_bounds_its_ring_segment(x1: float, width: float, y1: float, height: float) -> None:
+def test_radius_aligned_box_bounds_its_ring_segment(x1: float, width: float, y1: float,
+                                                    height: float) -> None:
     y2 = min(y1 + height, 95.0)
     box = np.array([[x1, y1, x1 + width, y2]])
     ra = GRID.polar_to_radius_aligned(box)

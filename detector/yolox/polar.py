@@ -1,0 +1,111 @@
+"""The person detector of FishLoc 0.2: YOLOX-Nano (COCO-pretrained) reading the polar unwrap.
+
+`PolarDetectorConfig` is what a checkpoint stores of it (the network's size and the strip it reads,
+DESIGN.md's `polar` view); `PolarContract` is the module that becomes the ONNX graph: uint8 RGB
+strips in, the top `max_detections` person boxes (`xyxy` strip px) and scores out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+from typing import Any
+
+import torch
+from torch import Tensor, nn
+
+from contract import BOX_FORMATS, VIEW_POLAR, ModelInfo, PolarSpec
+from detector.yolox.decode import class_scores, decode
+from detector.yolox.network import YoloxConfig, YoloxNano
+
+ARCH = "yolox-polar"
+LICENCE = "Apache-2.0 (weights fine-tuned from YOLOX-Nano, Copyright (c) Megvii Inc.)"
+PAD_VALUE = 0
+# YOLOX's boxes are in pixel-edge coordinates (pixel i spans [i, i + 1)); FishLoc's pixel centres
+# sit at integers. Training labels add this, the graph takes it away.
+EDGE_TO_CENTRE_PX = 0.5
+
+
+@dataclass(frozen=True)
+class PolarDetectorConfig:
+    """A YOLOX network reading a polar strip of `input_size` rows and `polar_width` columns per
+    turn plus `polar_overlap` repeated ones, whose top row is the ring θ = `polar_max_theta_deg`."""
+
+    input_size: int = 416
+    polar_width: int = 1664
+    polar_overlap: int = 128
+    polar_max_theta_deg: float = 90.0
+    num_classes: int = 1
+    depth: float = 0.33
+    width: float = 0.25
+    max_detections: int = 300
+    model_name: str = "fishloc-yolox-nano-polar"
+    arch: str = ARCH
+
+    def __post_init__(self) -> None:
+        if self.input_size % 32 or (self.polar_width + self.polar_overlap) % 32:
+            raise ValueError(f"strip {self.input_size} x ({self.polar_width} + {self.polar_overlap}) px: "
+                             "height and total width must be multiples of 32")
+        if self.arch != ARCH:
+            raise ValueError(f"arch {self.arch!r} is not {ARCH!r}")
+        PolarSpec(self.polar_width, self.polar_overlap, self.polar_max_theta_deg)  # checks the strip
+
+    @property
+    def yolox(self) -> YoloxConfig:
+        return YoloxConfig(num_classes=self.num_classes, depth=self.depth, width=self.width)
+
+    @property
+    def strip_wh(self) -> tuple[int, int]:
+        return self.polar_width + self.polar_overlap, self.input_size
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, record: dict[str, Any]) -> PolarDetectorConfig:
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in record.items() if k in names})
+
+    def model_info(self, version: str, trained_on: str, default_min_score: float) -> ModelInfo:
+        """The contract metadata of this network's export."""
+        return ModelInfo(name=self.model_name, version=version, view=VIEW_POLAR, input_size=self.input_size,
+                         pad_value=PAD_VALUE, default_min_score=default_min_score, trained_on=trained_on,
+                         box_format=BOX_FORMATS[VIEW_POLAR], licence=LICENCE,
+                         polar=PolarSpec(self.polar_width, self.polar_overlap, self.polar_max_theta_deg))
+
+
+def build_polar_network(config: PolarDetectorConfig) -> YoloxNano:
+    return YoloxNano(config.yolox)
+
+
+class PolarContract(nn.Module):
+    """(N, H, W, 3) uint8 RGB strips -> boxes (N, K, 4) float32 `xyxy` strip px (pixel centres at
+    integers), scores (N, K) float32 descending: objectness x p(person) of the top K cells."""
+
+    def __init__(self, net: YoloxNano, max_detections: int) -> None:
+        super().__init__()
+        self.net = net
+        self.max_detections = max_detections
+
+    def forward(self, image: Tensor) -> tuple[Tensor, Tensor]:
+        bgr = image.permute(0, 3, 1, 2).flip(1).float()  # (N, 3, H, W) BGR 0-255, as YOLOX was trained
+        decoded = decode(self.net(bgr))  # (N, A, 5 + C): cxcywh px, objectness, classes
+        scores = class_scores(decoded)[..., 0]  # (N, A) person
+        k = min(self.max_detections, scores.shape[1])
+        top_scores, top = torch.topk(scores, k, dim=1)  # (N, K)
+        cxcywh = torch.gather(decoded[..., :4], 1, top[..., None].expand(-1, -1, 4))  # (N, K, 4)
+        centre, half = cxcywh[..., :2] - EDGE_TO_CENTRE_PX, cxcywh[..., 2:] / 2
+        return torch.cat([centre - half, centre + half], dim=-1), top_scores
+
+
+def init_from_pretrained(path: str, config: PolarDetectorConfig) -> YoloxNano:
+    """The COCO YOLOX-Nano of an ONNX file, its head cut to the person class: the starting point
+    of fine-tuning and the zero-shot baseline. PretrainedWeightsError naming the file if unusable."""
+    from detector.yolox.network import PERSON, keep_classes
+    from detector.yolox.onnx_weights import load_yolox_onnx
+
+    coco = load_yolox_onnx(path)
+    if config.num_classes != 1 or (config.depth, config.width) != (coco.config.depth, coco.config.width):
+        raise ValueError(f"{path}: the pretrained network is YOLOX depth {coco.config.depth}, width "
+                         f"{coco.config.width}; the config asks for {config.depth}, {config.width} with "
+                         f"{config.num_classes} classes (a person detector has 1)")
+    return keep_classes(coco, [PERSON])
