@@ -30,6 +30,7 @@ from detector.plots import plot_pe_by_distance, plot_pr_curve
 from exporter.graph import ContractModel
 from exporter.onnx_runner import FrameDetections, ModelFormatError, OnnxDetector, postprocess
 from fisheye import Letterbox
+from fisheye.boxes import cepdof_to_corners
 
 EVAL_MIN_SCORE = 0.01  # detections kept for AP (the PR curve runs down to here)
 
@@ -85,6 +86,10 @@ class Evaluation:
     metrics: dict[str, Any]
 
 
+def _corners_or_none(cxcywha: NDArray[np.float64] | None) -> NDArray[np.float64] | None:
+    return None if cxcywha is None else cepdof_to_corners(cxcywha)
+
+
 def eval_frames(predictor: Predictor, frames: Sequence[FrameAnnotations], batch_size: int = 8,
                 progress: bool = False) -> list[EvalFrame]:
     """Run the predictor over annotated frames -> EvalFrames (detections with score ≥ 0.01)."""
@@ -98,7 +103,11 @@ def eval_frames(predictor: Predictor, frames: Sequence[FrameAnnotations], batch_
                 gt_boxes=frame.boxes_cxcywh, gt_locations_m=frame.locations_m,
                 gt_distances_m=frame.distances_m, det_boxes=detections.boxes_cxcywh,
                 det_scores=detections.scores, principal_point=frame.principal_point,
-                camera=frame.camera, split=frame.split, crowd_boxes=frame.crowd_cxcywh))
+                camera=frame.camera, split=frame.split, crowd_boxes=frame.crowd_cxcywh,
+                # CEPDOF/WEPDTOF frames are scored against the file's own boxes (DESIGN.md).
+                gt_corners=_corners_or_none(frame.file_boxes_cxcywha),
+                crowd_corners=_corners_or_none(frame.file_crowd_cxcywha),
+                camera_assumed=frame.camera_assumed))
     return result
 
 
@@ -165,7 +174,8 @@ def run(args: argparse.Namespace) -> int:
     Path(args.json).write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
     if args.plots:
         write_plots(evaluation, Path(args.plots), Path(args.model).name)
-    keys = ("mAP", "AP50", "AP75", "AP_near", "AP_mid", "AP_far", "mPE", "mPE_center", "PE_far",
-            "precision", "recall")
+    keys: tuple[str, ...] = ("mAP", "AP50", "AP75", "AP_near", "AP_mid", "AP_far", "mPE", "mPE_center",
+                             "PE_far", "precision", "recall")
+    keys += tuple(k for k in ("AP50_radius_aligned",) if k in metrics)  # files with their own boxes
     print(json.dumps({k: metrics.get(k) for k in keys}))
     return 0
