@@ -39,9 +39,10 @@ from detector.data.readers import DatasetFormatError, FrameAnnotations, read_dat
 from detector.graph import contract_info, contract_module
 from detector.metrics import EvalFrame, compute_metrics, localisation_points, pr_curve
 from detector.plots import plot_pe_by_distance, plot_pr_curve
-from fisheye import FisheyeCamera, camera_from_dict
+from fisheye import FisheyeCamera, assumed_camera
+from fisheye.boxes import cepdof_to_corners
 
-EVAL_MIN_SCORE = 0.01  # detections kept for AP (the PR curve runs down to here)
+EVAL_MIN_SCORE = 0.05  # detections kept for AP (DESIGN.md, "Datasets"; the PR curve runs down to here)
 
 
 class Predictor(Protocol):
@@ -93,15 +94,6 @@ def load_predictor(path: str | Path, device: str = "cpu", threads: int | None = 
     return torch_predictor(contract_module(checkpoint, str(path)).to(device), contract_info(checkpoint))
 
 
-def assumed_camera(width: int, height: int) -> FisheyeCamera:
-    """DESIGN.md's camera for frames without a calibration: an ideal equidistant lens whose 180°
-    image circle fills the frame's shorter side, centred, 3 m up."""
-    focal = (min(width, height) / 2) / (math.pi / 2)
-    return camera_from_dict({"id": "assumed", "altitude_m": 3.0, "image_size": [width, height],
-                             "principal_point": [(width - 1) / 2, (height - 1) / 2],
-                             "focal_px": [focal, focal], "kb": [1.0]})
-
-
 def frame_camera(frame: FrameAnnotations) -> FisheyeCamera:
     return frame.camera if frame.camera is not None else assumed_camera(frame.width, frame.height)
 
@@ -110,6 +102,10 @@ def frame_camera(frame: FrameAnnotations) -> FisheyeCamera:
 class Evaluation:
     frames: list[EvalFrame]
     metrics: dict[str, Any]
+
+
+def _corners_or_none(cxcywha: NDArray[np.float64] | None) -> NDArray[np.float64] | None:
+    return None if cxcywha is None else cepdof_to_corners(cxcywha)
 
 
 def eval_frames(predictor: Predictor, frames: Sequence[FrameAnnotations], batch_size: int = 8,
@@ -126,7 +122,11 @@ def eval_frames(predictor: Predictor, frames: Sequence[FrameAnnotations], batch_
                 gt_boxes=frame.boxes_cxcywh, gt_locations_m=frame.locations_m,
                 gt_distances_m=frame.distances_m, det_boxes=detections.boxes_cxcywh,
                 det_scores=detections.scores, principal_point=frame.principal_point,
-                camera=frame.camera, split=frame.split, crowd_boxes=frame.crowd_cxcywh))
+                camera=frame.camera, split=frame.split, crowd_boxes=frame.crowd_cxcywh,
+                # CEPDOF/WEPDTOF frames are scored against the file's own boxes (DESIGN.md).
+                gt_corners=_corners_or_none(frame.file_boxes_cxcywha),
+                crowd_corners=_corners_or_none(frame.file_crowd_cxcywha),
+                camera_assumed=frame.camera_assumed))
     return result
 
 
@@ -193,7 +193,8 @@ def run(args: argparse.Namespace) -> int:
     Path(args.json).write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
     if args.plots:
         write_plots(evaluation, Path(args.plots), Path(args.model).name)
-    keys = ("mAP", "AP50", "AP75", "AP_near", "AP_mid", "AP_far", "mPE", "mPE_center", "PE_far",
-            "precision", "recall")
+    keys: tuple[str, ...] = ("mAP", "AP50", "AP75", "AP_near", "AP_mid", "AP_far", "mPE", "mPE_center",
+                             "PE_far", "precision", "recall")
+    keys += tuple(k for k in ("AP50_radius_aligned",) if k in metrics)  # files with their own boxes
     print(json.dumps({k: metrics.get(k) for k in keys}))
     return 0

@@ -1,4 +1,4 @@
-"""Detection and localisation metrics of LOAF, on radius-aligned boxes (pure numpy).
+"""Detection and localisation metrics of LOAF, on radius-aligned boxes or a dataset's own (numpy).
 
 - AP: COCO-style, 101-point interpolated, greedy matching by score with rotated-box IoU; `mAP` is the
   mean over IoU 0.50:0.05:0.95, `AP50`, `AP75` single thresholds.
@@ -13,6 +13,14 @@
 
 Crowd boxes (people marked `iscrowd`, too hidden to count) are ignore regions: a detection that
 matches no person but overlaps a crowd box at the IoU threshold counts neither way.
+
+Frames that carry a dataset's own boxes (CEPDOF/WEPDTOF `bbox`, as corners `gt_corners`) are scored
+against those, as DESIGN.md asks: the IoU is that of the detection's corners with the file box's
+corners. The radius-aligned scoring of the same frames is reported beside it, under the keys
+`mAP_radius_aligned`, `AP50_radius_aligned`, `AP75_radius_aligned`, `precision_radius_aligned` and
+`recall_radius_aligned` (only when some frame has file boxes; other frames are scored the same way in
+both). A frame whose camera is assumed (`camera_assumed`) has no floor truth: its detections get no
+floor distance and no localisation error from that camera.
 """
 
 from __future__ import annotations
@@ -24,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from fisheye import FisheyeCamera, foot_points, rotated_iou
+from fisheye import FisheyeCamera, cxcywh_to_corners, foot_points, polygon_iou, rotated_iou
 
 FloatArray = NDArray[np.float64]
 IOU_THRESHOLDS = np.round(np.arange(0.5, 0.951, 0.05), 2)
@@ -32,11 +40,16 @@ DISTANCE_BINS_M: dict[str, tuple[float, float]] = {
     "near": (0.0, 10.0), "mid": (10.0, 20.0), "far": (20.0, math.inf)}
 RECALL_POINTS = np.linspace(0.0, 1.0, 101)
 MAX_DETECTIONS = 100
+RADIUS_ALIGNED = "_radius_aligned"  # key suffix of the radius-aligned scoring of file-box frames
 
 
 @dataclass(frozen=True)
 class EvalFrame:
-    """Ground truth and detections of one frame, all boxes in frame px about `principal_point`."""
+    """Ground truth and detections of one frame, all boxes in frame px about `principal_point`.
+
+    `gt_corners` (G, 4, 2) and `crowd_corners` (M, 4, 2) px, when given, are the dataset's own boxes
+    of the same people and crowd boxes (what the frame is scored against); `camera_assumed` marks a
+    camera that is no calibration, whose floor positions must not be taken for measurements."""
 
     gt_boxes: FloatArray  # (G, 4)
     gt_locations_m: FloatArray  # (G, 2), NaN when unknown
@@ -47,6 +60,9 @@ class EvalFrame:
     camera: FisheyeCamera | None = None
     split: str = ""
     crowd_boxes: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
+    gt_corners: FloatArray | None = None  # (G, 4, 2)
+    crowd_corners: FloatArray | None = None  # (M, 4, 2)
+    camera_assumed: bool = False
 
     def __post_init__(self) -> None:
         g, d = len(self.gt_boxes), len(self.det_boxes)
@@ -54,6 +70,16 @@ class EvalFrame:
                 or self.gt_distances_m.shape != (g,) or self.det_boxes.shape != (d, 4)
                 or self.det_scores.shape != (d,)):
             raise ValueError("EvalFrame arrays disagree in shape")
+        if self.gt_corners is not None and self.gt_corners.shape != (g, 4, 2):
+            raise ValueError(f"EvalFrame gt_corners {self.gt_corners.shape} must be ({g}, 4, 2)")
+        m = len(self.crowd_boxes)
+        if self.crowd_corners is not None and self.crowd_corners.shape != (m, 4, 2):
+            raise ValueError(f"EvalFrame crowd_corners {self.crowd_corners.shape} must be ({m}, 4, 2)")
+
+    @property
+    def floor_camera(self) -> FisheyeCamera | None:
+        """The camera whose floor positions count as measurements: None when it is assumed."""
+        return None if self.camera_assumed else self.camera
 
 
 @dataclass
@@ -109,19 +135,29 @@ def average_precision(scores: FloatArray, true_positive: NDArray[np.bool_], num_
     return float(sampled.mean())
 
 
-def _prepare(frame: EvalFrame) -> FrameMatch:
+def _prepare(frame: EvalFrame, file_boxes: bool = True) -> FrameMatch:
+    """Match data of a frame against its file boxes when it has them and `file_boxes` is set,
+    else against its radius-aligned boxes."""
     order = np.argsort(-frame.det_scores, kind="stable")[:MAX_DETECTIONS]
-    iou = rotated_iou(frame.det_boxes[order], frame.gt_boxes, frame.principal_point)
-    crowd = rotated_iou(frame.det_boxes[order], frame.crowd_boxes, frame.principal_point)
+    if file_boxes and frame.gt_corners is not None:
+        det_corners = cxcywh_to_corners(frame.det_boxes[order], frame.principal_point)
+        crowd_corners = (frame.crowd_corners if frame.crowd_corners is not None
+                         else cxcywh_to_corners(frame.crowd_boxes, frame.principal_point))
+        iou = polygon_iou(det_corners, frame.gt_corners)
+        crowd = polygon_iou(det_corners, crowd_corners)
+    else:
+        iou = rotated_iou(frame.det_boxes[order], frame.gt_boxes, frame.principal_point)
+        crowd = rotated_iou(frame.det_boxes[order], frame.crowd_boxes, frame.principal_point)
     crowd_iou = crowd.max(axis=1) if crowd.size else np.zeros(len(order))
     return FrameMatch(order=order, iou=iou.reshape(len(order), len(frame.gt_boxes)), crowd_iou=crowd_iou)
 
 
 def _det_distances(frame: EvalFrame, order: NDArray[np.int64]) -> FloatArray:
-    if frame.camera is None:
+    camera = frame.floor_camera
+    if camera is None:
         return np.full(len(order), np.nan)
-    feet = foot_points(frame.det_boxes[order], frame.camera.principal_point)
-    return frame.camera.floor_positions(feet).distance_m
+    feet = foot_points(frame.det_boxes[order], camera.principal_point)
+    return camera.floor_positions(feet).distance_m
 
 
 def _ap_at(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch], threshold: float,
@@ -149,17 +185,24 @@ def _ap_at(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch], threshol
     return average_precision(np.concatenate(scores), np.concatenate(positives), num_gt)
 
 
+def _ap_summary(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch]) -> dict[str, float]:
+    """`mAP` (IoU 0.50:0.05:0.95), `AP50` and `AP75` of matched frames."""
+    per_threshold = [_ap_at(frames, prepared, float(t)) for t in IOU_THRESHOLDS]
+    return {"mAP": float(np.mean(per_threshold)), "AP50": per_threshold[0], "AP75": per_threshold[5]}
+
+
 def _localisation_errors(frame: EvalFrame, match: FrameMatch, use_foot: bool
                          ) -> tuple[FloatArray, FloatArray]:
     """(M,) errors m and (M,) GT distances m of the IoU-0.5 matches with known positions."""
-    if frame.camera is None:
+    camera = frame.floor_camera
+    if camera is None:
         return np.zeros(0), np.zeros(0)
     matched = greedy_match(match.iou, 0.5)
     det_index = match.order[matched >= 0]
     gt_index = matched[matched >= 0]
     boxes = frame.det_boxes[det_index]
-    points = foot_points(boxes, frame.camera.principal_point) if use_foot else boxes[:, :2]
-    predicted = frame.camera.pixels_to_floor(points.reshape(-1, 2))
+    points = foot_points(boxes, camera.principal_point) if use_foot else boxes[:, :2]
+    predicted = camera.pixels_to_floor(points.reshape(-1, 2))
     truth = frame.gt_locations_m[gt_index]
     error = np.linalg.norm(predicted - truth, axis=1)
     valid = np.isfinite(error)
@@ -206,12 +249,7 @@ def pr_curve(frames: Sequence[EvalFrame]) -> tuple[FloatArray, FloatArray, Float
 def compute_metrics(frames: Sequence[EvalFrame], min_score: float) -> dict[str, float]:
     """Every metric of the module docstring for one set of frames (NaN where undefined)."""
     prepared = [_prepare(frame) for frame in frames]
-    per_threshold = [_ap_at(frames, prepared, float(t)) for t in IOU_THRESHOLDS]
-    result: dict[str, float] = {
-        "mAP": float(np.mean(per_threshold)),
-        "AP50": per_threshold[0],
-        "AP75": per_threshold[5],
-    }
+    result: dict[str, float] = _ap_summary(frames, prepared)
     for name, distance_range in DISTANCE_BINS_M.items():
         result[f"AP_{name}"] = _ap_at(frames, prepared, 0.5, distance_range)
     for suffix, use_foot in (("", True), ("_center", False)):
@@ -225,6 +263,12 @@ def compute_metrics(frames: Sequence[EvalFrame], min_score: float) -> dict[str, 
     result["precision"], result["recall"] = precision_recall_at(frames, prepared, min_score)
     result["num_frames"] = float(len(frames))
     result["num_gt"] = float(sum(len(f.gt_boxes) for f in frames))
+    if any(frame.gt_corners is not None for frame in frames):
+        aligned = [_prepare(frame, file_boxes=False) for frame in frames]
+        for key, value in _ap_summary(frames, aligned).items():
+            result[f"{key}{RADIUS_ALIGNED}"] = value
+        precision, recall = precision_recall_at(frames, aligned, min_score)
+        result[f"precision{RADIUS_ALIGNED}"], result[f"recall{RADIUS_ALIGNED}"] = precision, recall
     return result
 
 

@@ -15,6 +15,7 @@ from fisheye.calibration import MarkResiduals, RulerFit, RulerFitConfig, fit_rul
 from fisheye.camera import FisheyeCamera, FloorPoints
 from fisheye.camera_file import (
     CalibrationError,
+    assumed_camera,
     camera_from_dict,
     camera_from_opencv,
     camera_to_dict,
@@ -38,6 +39,7 @@ __all__ = [
     "RulerFitConfig",
     "RulerMarks",
     "SitePose",
+    "assumed_camera",
     "camera_from_dict",
     "camera_from_opencv",
     "camera_to_dict",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -12,6 +13,9 @@ import yaml
 from pydantic import ValidationError
 
 from fisheye.camera import FisheyeCamera
+
+ASSUMED_CAMERA_ID = "assumed"
+ASSUMED_ALTITUDE_M = 3.0
 
 
 class CalibrationError(ValueError):
@@ -128,6 +132,22 @@ def camera_from_opencv(
         "focal_px": [matrix[0, 0], matrix[1, 1]],
         "kb": [1.0, *distortion.tolist()],
         **extra,
+    })
+
+
+def assumed_camera(width: int, height: int) -> FisheyeCamera:
+    """The camera DESIGN.md assumes for a frame that has no calibration (CEPDOF, WEPDTOF): an ideal
+    equidistant lens (`kb = [1]`) whose 180° image circle fills the frame's shorter side, the
+    principal point at the frame's centre, 3 m up. Its floor positions are guesses, not truth."""
+    radius_px = min(width, height) / 2.0
+    focal_px = radius_px / (math.pi / 2)  # θ = 90° lands on the circle of the shorter side
+    return camera_from_dict({
+        "id": ASSUMED_CAMERA_ID,
+        "altitude_m": ASSUMED_ALTITUDE_M,
+        "image_size": [int(width), int(height)],
+        "principal_point": [(width - 1) / 2.0, (height - 1) / 2.0],
+        "focal_px": [focal_px, focal_px],
+        "kb": [1.0],
     })
 
 

@@ -4,8 +4,11 @@ FishLoc/LOAF-style files (what `fishloc synth` writes) give each person a radius
 `rotated_box: [cx, cy, w, h]` and a floor position `location_m`, and each image its camera; the
 LOAF release's `rotated_box: [cx, cy, w, h, angle_deg]` (angle counter-clockwise, see
 `fisheye.boxes.loaf_to_radius_aligned`) is read too.
-CEPDOF/WEPDTOF files give `bbox: [cx, cy, w, h, angle_deg]` and no camera; their boxes are turned
-radius-aligned about the image centre. `read_dataset` tells the two apart by their annotations.
+CEPDOF/WEPDTOF files give `bbox: [cx, cy, w, h, angle_deg]` and no camera; their frames get
+DESIGN.md's assumed camera (`fisheye.assumed_camera`, marked `camera_assumed`), keep the file's boxes
+as they are (`file_boxes_cxcywha`, what evaluation scores against) and have them turned
+radius-aligned about the image centre beside them. `read_dataset` tells the two apart by their
+annotations.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from numpy.typing import NDArray
 
 from fisheye import (
     FisheyeCamera,
+    assumed_camera,
     camera_from_dict,
     camera_to_dict,
     cepdof_to_radius_aligned,
@@ -44,7 +48,12 @@ class FrameAnnotations:
     `areas_px` (N,) are the file's axis-aligned `bbox` and `area` of each person's silhouette (NaN
     where it gives none; None when the frame was not read from a file). `crowd_cxcywh` (M, 4) are
     the boxes marked `iscrowd` (people too hidden to count): evaluation neither rewards nor
-    penalises detections on them, training leaves them out."""
+    penalises detections on them, training leaves them out.
+
+    Frames of CEPDOF/WEPDTOF files keep the file's own boxes `[cx, cy, w, h, angle_deg]` as
+    `file_boxes_cxcywha` (N, 5) and `file_crowd_cxcywha` (M, 5), parallel to `boxes_cxcywh` and
+    `crowd_cxcywh` (None for FishLoc-format frames). `camera_assumed` says the camera is DESIGN.md's
+    assumed one, not a calibration: floor positions from it are not ground truth."""
 
     path: Path
     image_id: int | str
@@ -60,9 +69,21 @@ class FrameAnnotations:
     crowd_cxcywh: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
     bboxes_xywh: FloatArray | None = None
     areas_px: FloatArray | None = None
+    file_boxes_cxcywha: FloatArray | None = None
+    file_crowd_cxcywha: FloatArray | None = None
+    camera_assumed: bool = False
 
     def __post_init__(self) -> None:
         n = len(self.boxes_cxcywh)
+        file_shapes = (_shape(self.file_boxes_cxcywha), _shape(self.file_crowd_cxcywha))
+        if file_shapes not in ((None, None), ((n, 5), (len(self.crowd_cxcywh), 5))):
+            raise ValueError(
+                f"{self.path}: file boxes {file_shapes[0]} and file crowd boxes {file_shapes[1]} must "
+                f"both be given, parallel to boxes {self.boxes_cxcywh.shape} and crowd "
+                f"{self.crowd_cxcywh.shape}, or neither"
+            )
+        if self.camera_assumed and self.camera is None:
+            raise ValueError(f"{self.path}: camera_assumed without a camera")
         if (self.boxes_cxcywh.shape != (n, 4) or self.locations_m.shape != (n, 2)
                 or self.distances_m.shape != (n,) or self.visible_fraction.shape != (n,)
                 or (self.bboxes_xywh is not None and self.bboxes_xywh.shape != (n, 4))
@@ -87,6 +108,10 @@ class FrameAnnotations:
 
     def __len__(self) -> int:
         return len(self.boxes_cxcywh)
+
+
+def _shape(array: FloatArray | None) -> tuple[int, ...] | None:
+    return None if array is None else array.shape
 
 
 def _numbers(record: Mapping[str, Any], key: str, count: int, where: str) -> list[float] | None:
@@ -142,12 +167,21 @@ def _frame(image: Mapping[str, Any], annotations: list[Mapping[str, Any]], folde
             camera = camera_from_dict(image["camera"]).scaled_to((width, height))
         except ValueError as error:
             raise DatasetFormatError(f"{where}: {error}") from None
+    camera_assumed = file_format == "cepdof" and camera is None
+    if camera_assumed:
+        try:
+            camera = assumed_camera(width, height)
+        except ValueError as error:
+            raise DatasetFormatError(f"{where}: no camera can be assumed: {error}") from None
     principal = camera.principal_point if camera is not None else ((width - 1) / 2, (height - 1) / 2)
     boxes, locations, distances, visible, crowd = [], [], [], [], []
+    file_boxes: list[list[float]] = []
+    file_crowd: list[list[float]] = []
     bboxes: list[list[float]] = []
     areas: list[float] = []
     for index, annotation in enumerate(annotations):
         at = f"{where} annotation {annotation.get('id', index)!r}"
+        raw: list[float] | None = None
         if file_format == "fishloc":
             box = _rotated_box(annotation, principal, at)
         else:
@@ -157,7 +191,11 @@ def _frame(image: Mapping[str, Any], annotations: list[Mapping[str, Any]], folde
             box = cepdof_to_radius_aligned(np.asarray([raw]), principal)[0].tolist()
         if annotation.get("iscrowd", 0):
             crowd.append(box)
+            if raw is not None:
+                file_crowd.append(raw)
             continue
+        if raw is not None:
+            file_boxes.append(raw)
         location = _numbers(annotation, "location_m", 2, at)
         xy = np.asarray(location if location is not None else [np.nan, np.nan])
         distance = annotation.get("distance_m")
@@ -177,6 +215,7 @@ def _frame(image: Mapping[str, Any], annotations: list[Mapping[str, Any]], folde
             raise DatasetFormatError(f"{at}: area must be a number, got {area!r}")
         areas.append(float(area) if area is not None else np.nan)
     n = len(boxes)
+    from_file = file_format == "cepdof"
     return FrameAnnotations(
         path=path,
         image_id=image.get("id", path.stem),
@@ -192,6 +231,9 @@ def _frame(image: Mapping[str, Any], annotations: list[Mapping[str, Any]], folde
         crowd_cxcywh=np.asarray(crowd, dtype=np.float64).reshape(-1, 4),
         bboxes_xywh=np.asarray(bboxes, dtype=np.float64).reshape(n, 4),
         areas_px=np.asarray(areas, dtype=np.float64).reshape(n),
+        file_boxes_cxcywha=np.asarray(file_boxes, dtype=np.float64).reshape(n, 5) if from_file else None,
+        file_crowd_cxcywha=np.asarray(file_crowd, dtype=np.float64).reshape(-1, 5) if from_file else None,
+        camera_assumed=camera_assumed,
     )
 
 
@@ -262,7 +304,7 @@ def write_dataset(frames: Sequence[FrameAnnotations], path: str | Path,
             "scene_id": frame.scene_id,
             "split": frame.split,
         }
-        if frame.camera is not None:
+        if frame.camera is not None and not frame.camera_assumed:  # an assumption is no calibration
             image["camera"] = camera_to_dict(frame.camera)
         images.append(image)
         for index in range(len(frame)):

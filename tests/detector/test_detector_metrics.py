@@ -1,12 +1,14 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from detector.metrics import EvalFrame, average_precision, compute_metrics, greedy_match
-from fisheye import camera_from_dict
+from fisheye import camera_from_dict, cepdof_to_radius_aligned, cxcywh_to_corners, polygon_iou
+from fisheye.boxes import cepdof_to_corners
 
 # An ideal equidistant lens, 100 px per radian, 3 m up, principal point at the centre of 400x400.
 CAMERA = camera_from_dict({"id": "hand", "altitude_m": 3.0, "image_size": [400, 400],
@@ -94,3 +96,82 @@ def test_detections_on_crowd_boxes_count_neither_way() -> None:
     metrics = compute_metrics([with_crowd], 0.5)
     assert metrics["AP50"] == pytest.approx(1.0)
     assert metrics["precision"] == 1.0 and metrics["recall"] == 1.0
+
+
+# CEPDOF-style file boxes [cx, cy, w, h, angle_deg], 100 px above the principal point, where the ray
+# points up: angle 0 would lie on it. Annotators draw sitting or leaning people off the ray.
+LEANING = [199.5, 99.5, 24.0, 60.0, 40.0]  # 40° off the ray: its radius-aligned conversion is upright
+SITTING = [199.5, 99.5, 30.0, 60.0, 44.0]
+HUGS_SITTING = [199.5, 99.5, 58.0, 32.0]  # wide and short: covers the 44° box, not its conversion
+
+
+def _file_frame(file_boxes: list[list[float]], dets: list[list[float]], scores: list[float],
+                camera_assumed: bool = True) -> EvalFrame:
+    cxcywha = np.array(file_boxes, dtype=float).reshape(-1, 5)
+    g = len(cxcywha)
+    return EvalFrame(cepdof_to_radius_aligned(cxcywha, PP), np.full((g, 2), np.nan), np.full(g, np.nan),
+                     np.array(dets, dtype=float).reshape(-1, 4), np.array(scores, dtype=float), PP,
+                     CAMERA, gt_corners=cepdof_to_corners(cxcywha), camera_assumed=camera_assumed)
+
+
+def test_a_tilted_file_box_is_not_its_radius_aligned_conversion() -> None:
+    file_corners = cepdof_to_corners(np.array([LEANING]))
+    converted = cxcywh_to_corners(cepdof_to_radius_aligned(np.array([LEANING]), PP), PP)
+    assert polygon_iou(file_corners, file_corners)[0, 0] == pytest.approx(1.0)
+    assert polygon_iou(file_corners, converted)[0, 0] == pytest.approx(0.4456, abs=1e-4)
+
+
+@pytest.mark.parametrize(("file_box", "detection", "expected", "radius_aligned"), [
+    # The conversion itself: a perfect match radius-aligned, under IoU 0.5 with what was drawn.
+    (LEANING, cepdof_to_radius_aligned(np.array([LEANING]), PP)[0].tolist(), (0.0, 0.0), (1.0, 1.0)),
+    # A box that hugs the drawn one (IoU 0.53: a match at 0.50 only) but not its conversion (IoU 0.36).
+    (SITTING, HUGS_SITTING, (1.0, 0.1), (0.0, 0.0)),
+])
+def test_file_boxes_are_the_headline_and_radius_aligned_scoring_is_reported_beside_it(
+    file_box: list[float], detection: list[float], expected: tuple[float, float],
+    radius_aligned: tuple[float, float],
+) -> None:
+    """(AP50, mAP) against the file's box and against its radius-aligned conversion."""
+    metrics = compute_metrics([_file_frame([file_box], [detection], [0.9])], min_score=0.5)
+    assert (metrics["AP50"], metrics["mAP"]) == pytest.approx(expected)
+    assert (metrics["AP50_radius_aligned"], metrics["mAP_radius_aligned"]) == pytest.approx(radius_aligned)
+    assert metrics["precision"] == metrics["recall"] == expected[0]
+    assert metrics["precision_radius_aligned"] == metrics["recall_radius_aligned"] == radius_aligned[0]
+
+
+def test_file_crowd_boxes_are_the_ignore_regions_of_file_box_frames() -> None:
+    crowd_file = np.array([[299.5, 199.5, 30.0, 60.0, -46.0]])  # right of the centre, 44° off the ray
+    hugs_crowd = [299.5, 199.5, 58.0, 32.0]
+    frame = _file_frame([SITTING], [HUGS_SITTING, hugs_crowd], [0.6, 0.9])
+    with_crowd = replace(frame, crowd_boxes=cepdof_to_radius_aligned(crowd_file, PP),
+                         crowd_corners=cepdof_to_corners(crowd_file))
+    metrics = compute_metrics([with_crowd], min_score=0.5)
+    assert metrics["AP50"] == pytest.approx(1.0)  # the detection on the crowd counts neither way
+    assert metrics["precision"] == 1.0
+    assert metrics["AP50_radius_aligned"] == 0.0  # both miss the conversions
+    assert metrics["precision_radius_aligned"] == 0.0
+
+
+def test_frames_without_file_boxes_are_scored_as_before_and_add_no_keys() -> None:
+    box = [199.5, 119.5, 16.0, 40.0]
+    frame = _frame([box], [[0.0, 2.0]], [box, [199.5, 300.0, 10.0, 20.0]], [0.95, 0.5])
+    metrics = compute_metrics([frame], min_score=0.3)
+    assert not any(key.endswith("_radius_aligned") for key in metrics)
+    # The same person given as its own file box (corners of the radius-aligned box) scores the same.
+    as_file = replace(frame, gt_corners=cxcywh_to_corners(frame.gt_boxes, PP))
+    both = compute_metrics([as_file], min_score=0.3)
+    assert {k: v for k, v in both.items() if not k.endswith("_radius_aligned")} == pytest.approx(
+        metrics, nan_ok=True)
+    assert both["AP50_radius_aligned"] == metrics["AP50"] and both["mAP_radius_aligned"] == metrics["mAP"]
+
+
+def test_an_assumed_camera_gives_no_floor_errors_or_distances() -> None:
+    # Even a person with a position gets no error from a camera that is only assumed.
+    box = [199.5, 119.5, 16.0, 40.0]
+    measured = _frame([box], [[0.0, 2.0]], [box], [0.95])
+    assert compute_metrics([measured], 0.3)["PE_matches"] == 1.0
+    metrics = compute_metrics([replace(measured, camera_assumed=True)], 0.3)
+    assert metrics["PE_matches"] == 0.0 and math.isnan(metrics["mPE"]) and math.isnan(metrics["mPE_center"])
+    # A CEPDOF-like frame: no positions, no distances -> distance-binned AP and PE undefined.
+    cepdof = compute_metrics([_file_frame([SITTING], [HUGS_SITTING], [0.9])], 0.5)
+    assert all(math.isnan(cepdof[k]) for k in ("AP_near", "AP_mid", "AP_far", "mPE", "PE_near"))

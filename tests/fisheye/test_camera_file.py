@@ -9,6 +9,7 @@ import yaml
 
 from fisheye import (
     CalibrationError,
+    assumed_camera,
     camera_from_dict,
     camera_from_opencv,
     camera_to_dict,
@@ -193,3 +194,18 @@ def test_bad_opencv_files(tmp_path: Path, content: str, message: str) -> None:
 def test_missing_opencv_file(tmp_path: Path) -> None:
     with pytest.raises(CalibrationError, match="cannot read"):
         read_opencv_calibration(tmp_path / "absent.yaml")
+
+
+@pytest.mark.parametrize(("width", "height"), [(2048, 2048), (640, 480), (1080, 1920)])
+def test_assumed_camera_fills_the_shorter_side_with_its_180_degree_circle(width: int, height: int) -> None:
+    camera = assumed_camera(width, height)
+    half_short = min(width, height) / 2
+    assert (camera.id, camera.altitude_m, camera.kb) == ("assumed", 3.0, [1.0])
+    assert camera.image_size == (width, height)
+    assert camera.principal_point == ((width - 1) / 2, (height - 1) / 2)
+    assert camera.focal_px == pytest.approx((half_short / (np.pi / 2),) * 2)
+    # Horizontal rays (θ = 90°) land on the edges of the shorter side: pixel centres ±0.5 px inside.
+    u0, v0 = camera.principal_point
+    edges = camera.rays_to_pixels(np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]))
+    np.testing.assert_allclose(edges, [[u0 + half_short, v0], [u0, v0 - half_short]], atol=1e-9)
+    assert camera == load_camera(camera_to_dict(camera))  # a valid camera file

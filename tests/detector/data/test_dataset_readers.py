@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from detector.data.readers import DatasetFormatError, read_dataset, write_dataset
-from fisheye import foot_points, radius_aligned_to_cepdof
+from fisheye import assumed_camera, foot_points, radius_aligned_to_cepdof
 
 FIXTURES = Path(__file__).parent / "fixtures"
 
@@ -18,7 +18,8 @@ def test_fishloc_format_round_trip(toy_dataset: Callable[..., Path], tmp_path: P
     frames = read_dataset(source)
     assert len(frames) == 3 and all(len(f) == 3 for f in frames)
     first = frames[0]
-    assert first.camera is not None and first.camera.id == "toy"
+    assert first.camera is not None and first.camera.id == "toy" and not first.camera_assumed
+    assert first.file_boxes_cxcywha is None and first.file_crowd_cxcywha is None
     assert first.path.exists() and first.split == "seen"
     np.testing.assert_allclose(first.distances_m, np.hypot(*first.locations_m.T))
     copy = source.parent / "copy.json"
@@ -44,8 +45,12 @@ def test_cepdof_boxes_become_radius_aligned_about_the_frame_centre(tmp_path: Pat
     path = tmp_path / "cepdof.json"
     path.write_text(json.dumps(document))
     (frame,) = read_dataset(path)
-    assert frame.camera is None and frame.principal_point == centre
+    assert frame.camera_assumed and frame.camera == assumed_camera(2048, 2048)
+    assert frame.principal_point == centre
     np.testing.assert_allclose(frame.boxes_cxcywh, radius_aligned, atol=1e-9)
+    assert frame.file_boxes_cxcywha is not None
+    np.testing.assert_array_equal(frame.file_boxes_cxcywha, cepdof)  # the file's own, as they were
+    # The assumed camera places nobody: positions and distances stay unknown.
     assert np.all(np.isnan(frame.locations_m)) and np.all(np.isnan(frame.distances_m))
 
 
@@ -87,9 +92,17 @@ def test_cepdof_style_files_read_into_radius_aligned_boxes(
     frames = read_dataset(FIXTURES / name)
     assert [f.image_id for f in frames] == list(expected)
     centre = ((size - 1) / 2, (size - 1) / 2)
+    raw = json.loads((FIXTURES / name).read_text())["annotations"]
     for frame in frames:
         boxes, crowd = expected[str(frame.image_id)]
-        assert frame.camera is None and frame.principal_point == centre
+        assert frame.camera_assumed and frame.camera == assumed_camera(size, size)
+        assert frame.principal_point == centre
+        mine = [a for a in raw if a["image_id"] == frame.image_id]
+        assert frame.file_boxes_cxcywha is not None and frame.file_crowd_cxcywha is not None
+        np.testing.assert_array_equal(frame.file_boxes_cxcywha,
+                                      np.array([a["bbox"] for a in mine if not a["iscrowd"]]).reshape(-1, 5))
+        np.testing.assert_array_equal(frame.file_crowd_cxcywha,
+                                      np.array([a["bbox"] for a in mine if a["iscrowd"]]).reshape(-1, 5))
         assert (frame.width, frame.height) == (size, size)
         assert frame.path == FIXTURES / f"{frame.image_id}.jpg"
         np.testing.assert_allclose(frame.boxes_cxcywh, np.array(boxes).reshape(-1, 4), atol=1e-9)
@@ -101,6 +114,27 @@ def test_cepdof_style_files_read_into_radius_aligned_boxes(
         np.testing.assert_array_equal(foot_points(frame.boxes_cxcywh[on_centre], centre),
                                       np.tile(centre, (int(on_centre.sum()), 1)))
     assert sum(int(np.all(f.boxes_cxcywh[:, :2] == centre, axis=1).sum()) for f in frames) == 1
+
+
+def test_frames_without_a_calibration_get_the_assumed_camera_and_do_not_write_it(tmp_path: Path) -> None:
+    """DESIGN.md: an ideal equidistant lens whose 180° circle fills the shorter side, 3 m up."""
+    path = tmp_path / "wide.json"
+    path.write_text(json.dumps({
+        "images": [{"id": "w", "file_name": "w.jpg", "width": 1920, "height": 1080}],
+        "annotations": [{"image_id": "w", "bbox": [900.0, 300.0, 40.0, 120.0, 10.0]}],
+    }))
+    (frame,) = read_dataset(path)
+    camera = frame.camera
+    assert camera is not None and frame.camera_assumed
+    assert (camera.id, camera.altitude_m, camera.kb) == ("assumed", 3.0, [1.0])
+    assert camera.image_size == (1920, 1080)
+    assert camera.principal_point == (959.5, 539.5)
+    assert camera.focal_px == pytest.approx((540 / (np.pi / 2),) * 2)
+    assert camera.image_circle_radius_px() == pytest.approx(540.0)
+    assert np.isnan(frame.distances_m).all() and np.isnan(frame.locations_m).all()
+    # Written as a FishLoc file, an assumption is not passed off as a calibration.
+    write_dataset([frame], tmp_path / "again.json")
+    assert "camera" not in json.loads((tmp_path / "again.json").read_text())["images"][0]
 
 
 @pytest.mark.parametrize(("content", "message"), [
