@@ -18,7 +18,7 @@ from detector.yolox.decode import class_scores, decode
 from detector.yolox.network import YoloxConfig, YoloxNano
 
 ARCH = "yolox-polar"
-LICENCE = "Apache-2.0 (weights fine-tuned from YOLOX-Nano, Copyright (c) Megvii Inc.)"
+LICENCE = "Apache-2.0 (weights from or fine-tuned from YOLOX-Nano, Copyright (c) Megvii Inc.)"
 PAD_VALUE = 0
 # YOLOX's boxes are in pixel-edge coordinates (pixel i spans [i, i + 1)); FishLoc's pixel centres
 # sit at integers. Training labels add this, the graph takes it away.
