@@ -55,8 +55,12 @@ def select_detections(raw: RawOutputs, mapping: InputMapping, principal_point: t
         foot_input = raw.foot.astype(np.float64)
         keep &= np.all(np.isfinite(foot_input), axis=1)
         foot = mapping.points_to_frame(foot_input[keep])
-    boxes_frame = mapping.boxes_to_frame(boxes[keep])
-    scores = scores[keep]
+    boxes, scores = boxes[keep], scores[keep]
+    if nms_iou is not None:
+        first = mapping.presuppress(boxes, scores, nms_iou)
+        boxes, scores = boxes[first], scores[first]
+        foot = None if foot is None else foot[first]
+    boxes_frame = mapping.boxes_to_frame(boxes)
     if nms_iou is not None and len(scores) > 1:
         kept = rotated_nms(boxes_frame, scores, principal_point, nms_iou)[:max_detections]
     else:

@@ -19,6 +19,7 @@ import math
 from dataclasses import dataclass
 from typing import Protocol
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -45,6 +46,12 @@ class InputMapping(Protocol):
         """(N,) which of (N, 4) finite boxes in the view's format have a positive size."""
         ...
 
+    def presuppress(self, boxes: NDArray[np.floating], scores: NDArray[np.floating],
+                    iou_threshold: float) -> NDArray[np.int64]:
+        """Indices of (N, 4) boxes left by a cheap NMS in input px before the rotated NMS in the
+        frame (which costs O(N²) polygon clips), best first; all of them where there is none."""
+        ...
+
 
 @dataclass(frozen=True)
 class FisheyeInput:
@@ -61,6 +68,10 @@ class FisheyeInput:
     def has_area(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
         return (boxes[:, 2] > 0) & (boxes[:, 3] > 0)
 
+    def presuppress(self, boxes: NDArray[np.floating], scores: NDArray[np.floating],
+                    iou_threshold: float) -> NDArray[np.int64]:
+        return np.argsort(-np.asarray(scores), kind="stable")
+
 
 @dataclass(frozen=True)
 class PolarInput:
@@ -76,6 +87,17 @@ class PolarInput:
 
     def has_area(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
         return (boxes[:, 2] > boxes[:, 0]) & (boxes[:, 3] > boxes[:, 1])
+
+    def presuppress(self, boxes: NDArray[np.floating], scores: NDArray[np.floating],
+                    iou_threshold: float) -> NDArray[np.int64]:
+        # Axis-aligned NMS in the strip (OpenCV's, in C++): the strip boxes of one person overlap
+        # there as their ring segments do in the frame. The frame's rotated NMS then only merges
+        # what the strip cannot see, the copies of a person in the overlap columns.
+        if len(scores) == 0:
+            return np.zeros(0, dtype=np.int64)
+        xywh = np.concatenate([boxes[:, :2], boxes[:, 2:] - boxes[:, :2]], axis=1)
+        kept = cv2.dnn.NMSBoxes(xywh.tolist(), np.asarray(scores, dtype=float).tolist(), 0.0, iou_threshold)
+        return np.asarray(kept, dtype=np.int64).reshape(-1)
 
 
 def polar_radius_px(camera: FisheyeCamera, max_theta_deg: float) -> float:
