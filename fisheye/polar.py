@@ -15,9 +15,10 @@ principal point. `width` columns cover 360°; a strip may carry `overlap` more c
 its first ones, so that nobody standing at the seam is cut in two.
 
 A strip box [x1, y1, x2, y2] is the ring segment ψ ∈ [ψ(x1), ψ(x2)], ρ ∈ [ρ(y2), ρ(y1)]; in the frame
-it becomes the radius-aligned box that bounds that segment (`polar_to_radius_aligned`), and
-`radius_aligned_to_polar` is its exact inverse for boxes that leave the principal point outside
-(training labels are built with it, so a model is read back the way its labels were made).
+it becomes the radius-aligned box on the segment's middle ray, as long as the segment and as wide
+as its middle arc (`polar_to_radius_aligned`), and `radius_aligned_to_polar` is its exact inverse
+for boxes that leave the principal point outside (training labels are built with it, so a model is
+read back the way its labels were made).
 """
 
 from __future__ import annotations
@@ -125,47 +126,51 @@ class PolarGrid:
     # ----- boxes
 
     def polar_to_radius_aligned(self, xyxy: ArrayLike) -> FloatArray:
-        """(N, 4) strip boxes `x1, y1, x2, y2` -> (N, 4) radius-aligned `cxcywh` frame px: the box
-        whose sides bound the ring segment the strip box covers."""
+        """(N, 4) strip boxes `x1, y1, x2, y2` -> (N, 4) radius-aligned `cxcywh` frame px.
+
+        The ring segment [ψ1, ψ2] × [ρ_in, ρ_out] becomes the box on its middle ray, centred at the
+        middle radius, `h = ρ_out − ρ_in` long and as wide as the segment's arc at the middle radius:
+        a person's tangential width is an angle (their width in metres over their distance), so the
+        middle arc measures their body where the bounding chord of the outer arc would measure the
+        widest point of a wedge (renders: mAP 0.39 against 0.32, same AP50). A segment wider than
+        half a turn (someone below the lens) becomes the square about the principal point that
+        holds the outer circle.
+        """
         boxes = as_points(xyxy, 4, "xyxy")
         angle_1 = self.column_to_angle_rad(boxes[:, 0])
         angle_2 = self.column_to_angle_rad(boxes[:, 2])
         outer = np.maximum(self.row_to_radius_px(boxes[:, 1]), 0.0)
-        inner = np.clip(self.row_to_radius_px(boxes[:, 3]), 0.0, None)
-        inner = np.minimum(inner, outer)
+        inner = np.minimum(np.clip(self.row_to_radius_px(boxes[:, 3]), 0.0, None), outer)
         direction = (angle_1 + angle_2) / 2
-        half_angle = np.clip(np.abs(angle_2 - angle_1) / 2, 0.0, math.pi)
-        cos_half, sin_half = np.cos(half_angle), np.sin(half_angle)
-        # Along the ray: from the nearer of the inner corners (or the far side of a wide segment)
-        # out to the middle of the outer arc; across it: the outer arc's chord, or its diameter.
-        near = np.minimum(inner * cos_half, outer * cos_half)
-        far = outer
-        half_width = np.where(half_angle <= math.pi / 2, outer * sin_half, outer)
-        middle = (near + far) / 2
+        half_angle = np.abs(angle_2 - angle_1) / 2
+        middle = (inner + outer) / 2
+        around = half_angle > math.pi / 2
+        centre = np.where(around, 0.0, middle)
         u0, v0 = self.principal_point
-        cx = u0 + middle * np.cos(direction)
-        cy = v0 + middle * np.sin(direction)
-        return np.stack([cx, cy, 2 * half_width, far - near], axis=1)
+        cx = u0 + centre * np.cos(direction)
+        cy = v0 + centre * np.sin(direction)
+        width = np.where(around, 2 * outer, 2 * half_angle * middle)
+        height = np.where(around, 2 * outer, outer - inner)
+        return np.stack([cx, cy, width, height], axis=1)
 
     def radius_aligned_to_polar(self, cxcywh: ArrayLike) -> FloatArray:
         """(N, 4) radius-aligned boxes -> (N, 4) strip boxes `x1, y1, x2, y2`, the first turn's
         columns (x1 may be below −0.5 or x2 past the turn for a box across the seam).
 
         The exact inverse of `polar_to_radius_aligned` for a box that leaves the principal point
-        outside; a box over the principal point becomes the full turn down to the bottom row.
+        outside and spans at most half a turn; a box over the principal point becomes the full turn
+        from the bottom row up to its far side.
         """
         boxes = as_points(cxcywh, 4, "cxcywh")
         offset = boxes[:, :2] - np.asarray(self.principal_point, dtype=np.float64)
         distance = np.hypot(offset[:, 0], offset[:, 1])
         direction = np.arctan2(offset[:, 1], offset[:, 0])
         half_w, half_h = boxes[:, 2] / 2, boxes[:, 3] / 2
+        over_centre = distance <= half_h
         outer = distance + half_h
-        near = distance - half_h
+        inner = np.where(over_centre, 0.0, distance - half_h)
         with np.errstate(invalid="ignore", divide="ignore"):
-            half_angle = np.arcsin(np.clip(half_w / np.where(outer > 0, outer, 1.0), 0.0, 1.0))
-            inner = np.where(near > 0, near / np.cos(half_angle), 0.0)
-        over_centre = near <= 0
-        half_angle = np.where(over_centre, math.pi, half_angle)
+            half_angle = np.minimum(half_w / np.where(over_centre, 1.0, distance), math.pi / 2)
         centre_column = self.angle_to_column(direction)
         half_columns = half_angle * self.px_per_rad
         x1 = np.where(over_centre, -0.5, centre_column - half_columns)

@@ -86,15 +86,16 @@ def test_polar_pipeline_places_the_person(tmp_path: Path, with_foot: bool, xy_m:
     assert detections.scores.tolist() == pytest.approx([SCORE], abs=1e-3)
     box = detections.cxcywh[0]
     pp = np.asarray(camera.principal_point)
-    # The strip box is centred on the disc, so its ring segment is too: the radius-aligned box that
-    # bounds the segment lies on the disc's ray, `BOX_WH[1]` rows long in frame px of radius.
+    # The strip box is centred on the disc, so its ring segment is too: the radius-aligned box lies
+    # on the disc's ray, `BOX_WH[1]` rows long in frame px of radius, as wide as the segment's
+    # arc through its centre.
     grid_radius = 320 * np.pi / 2  # 90° of this equidistant lens, inside the frame's corners
     offset, ray = box[:2] - pp, (uv - pp) / np.linalg.norm(uv - pp)
     assert abs(ray[0] * offset[1] - ray[1] * offset[0]) < 1.0
     assert box[3] == pytest.approx(BOX_WH[1] * grid_radius / 64, rel=0.01)
     outer = np.linalg.norm(uv - pp) + box[3] / 2  # the strip box's top row, from the disc's centre
     assert np.dot(offset, ray) + box[3] / 2 == pytest.approx(outer, abs=2.0)  # strip centroid: ±1-2 px
-    assert box[2] == pytest.approx(2 * outer * np.sin(BOX_WH[0] / 2 * np.pi / 128), rel=0.01)
+    assert box[2] == pytest.approx(BOX_WH[0] * 2 * np.pi / 256 * np.linalg.norm(offset), rel=0.01)
     if with_foot:
         # The model's foot (the strip box's bottom middle) is the middle of the segment's inner arc.
         expected = uv - ray * box[3] / 2

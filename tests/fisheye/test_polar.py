@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fisheye import cxcywh_to_corners
+from fisheye import foot_points
 from fisheye.polar import PolarGrid
 
 GRID = PolarGrid(principal_point=(511.5, 500.0), radius_px=480.0, height=96, width=384, overlap=32)
@@ -54,20 +54,30 @@ def test_polar_boxes_round_trip(boxes: np.ndarray) -> None:
 
 @settings(max_examples=200, deadline=None)
 @given(x1=st.floats(0, 380), width=st.floats(0.5, 60), y1=st.floats(-0.5, 80), height=st.floats(1, 40))
-def test_radius_aligned_box_bounds_its_ring_segment(x1: float, width: float, y1: float,
-                                                    height: float) -> None:
+def test_radius_aligned_box_sits_on_the_segments_middle(x1: float, width: float, y1: float,
+                                                       height: float) -> None:
     y2 = min(y1 + height, 95.0)
     box = np.array([[x1, y1, x1 + width, y2]])
     ra = GRID.polar_to_radius_aligned(box)
-    corners = cxcywh_to_corners(ra, GRID.principal_point)[0]
-    # Every point of the ring segment lies inside the radius-aligned box (a convex quad).
-    xs = np.linspace(box[0, 0], box[0, 2], 25)
-    ys = np.linspace(box[0, 1], box[0, 3], 25)
-    grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
-    points = GRID.strip_to_frame(grid).astype(np.float32)
-    contour = corners.astype(np.float32).reshape(-1, 1, 2)
-    inside = [cv2.pointPolygonTest(contour, (float(u), float(v)), True) for u, v in points]
-    assert min(inside) >= -1e-2
+    # Its centre is the strip box's centre mapped to the frame (middle ray, middle radius), it is
+    # as long as the segment and as wide as the segment's arc through its centre.
+    centre = GRID.strip_to_frame(np.array([[(box[0, 0] + box[0, 2]) / 2, (y1 + y2) / 2]]))[0]
+    np.testing.assert_allclose(ra[0, :2], centre, atol=1e-9)
+    middle = np.hypot(*(centre - np.array(GRID.principal_point)))
+    assert ra[0, 3] == pytest.approx((y2 - y1) * GRID.radius_px / GRID.height)
+    assert ra[0, 2] == pytest.approx(width * 2 * math.pi / GRID.width * middle)
+    # The inner corners of the box lie on the segment's inner arc's chord side: the foot point of
+    # the box is the middle of the inner arc.
+    foot = foot_points(ra, GRID.principal_point)[0]
+    expected = GRID.strip_to_frame(np.array([[(box[0, 0] + box[0, 2]) / 2, y2]]))[0]
+    np.testing.assert_allclose(foot, expected, atol=1e-6)
+
+
+def test_a_segment_wider_than_half_a_turn_is_the_square_about_the_principal_point() -> None:
+    ra = GRID.polar_to_radius_aligned(np.array([[0.0, 48.0, 250.0, 95.5]]))[0]
+    np.testing.assert_allclose(ra[:2], GRID.principal_point, atol=1e-9)
+    outer = GRID.row_to_radius_px(48.0)
+    np.testing.assert_allclose(ra[2:], [2 * outer, 2 * outer])
 
 
 def test_box_over_the_principal_point_becomes_the_whole_turn() -> None:
