@@ -204,7 +204,7 @@ class Finetuner:
         self.optimizer.step()
         self.scheduler.step()
         self.step += 1
-        return {k: float(v.detach()) for k, v in terms.items()}
+        return {k: v.item() for k, v in terms.items()}
 
     def validate(self) -> dict[str, Any]:
         if not self.val_frames:
