@@ -3,6 +3,8 @@
     fishloc train --data train/annotations.json --val val/annotations.json --out runs/NAME
     fishloc train ... --out runs/NAME --resume          # continue exactly where it stopped
     fishloc train --data mine.json --out runs/ft --init models/default.pt   # fine-tune
+    fishloc train --init-from models/pretrained/yolox_nano.onnx --data A.json --val V.json \
+        --out runs/polar [--strip 416 1664 128] [--distill 1.0] [--resume]   # the polar YOLOX
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ from detector.data.readers import DatasetFormatError, read_dataset
 from detector.losses import LossConfig
 from detector.model import DetectorConfig, tiny_config
 from detector.trainer import LAST, TrainConfig, Trainer
+from detector.yolox.finetune import STAGES, FinetuneConfig, Finetuner
+from detector.yolox.polar import PolarDetectorConfig, init_from_pretrained
 
 MODEL_SIZES = {"default": DetectorConfig, "tiny": tiny_config}
 
@@ -32,9 +36,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, help="run folder: checkpoints, log.jsonl, training.png")
     parser.add_argument("--init", default=None, help="start from this checkpoint's weights (fine-tune)")
     parser.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
-    parser.add_argument("--epochs", type=int, default=30)
-    parser.add_argument("--batch-size", type=int, default=16)
-    parser.add_argument("--lr", type=float, default=2e-3)
+    parser.add_argument("--epochs", type=int, default=None, help="default 30 (polar: 20)")
+    parser.add_argument("--batch-size", type=int, default=None, help="default 16 (polar: 8)")
+    parser.add_argument("--lr", type=float, default=None, help="default 2e-3 (polar: 5e-4)")
     parser.add_argument("--input-size", type=int, default=None, help="model input side (multiple of 32)")
     parser.add_argument("--model-size", choices=sorted(MODEL_SIZES), default="default")
     parser.add_argument("--equivariance", action=argparse.BooleanOptionalAction, default=True,
@@ -47,12 +51,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threads", type=int, default=None,
                         help="torch intra-op threads (on a busy CPU, 1 is often fastest)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    polar = parser.add_argument_group("polar YOLOX (fine-tuned from COCO YOLOX-Nano)")
+    polar.add_argument("--init-from", default=None, metavar="PATH.onnx",
+                       help="YOLOX-Nano's COCO ONNX: fine-tune the polar person detector from it")
+    polar.add_argument("--strip", type=int, nargs=3, default=None, metavar=("HEIGHT", "WIDTH", "OVERLAP"),
+                       help="strip rows, columns per turn and overlap columns (default 416 1664 128)")
+    polar.add_argument("--freeze", nargs="*", default=None, choices=STAGES,
+                       help="network stages kept frozen (default: stem dark2 dark3; none: no stage)")
+    polar.add_argument("--distill", type=float, default=None, help="λ of the COCO distillation (default 1.0)")
+    polar.add_argument("--checkpoint-every", type=float, default=None,
+                       help="seconds between checkpoints to OUT/last.pt (default 180)")
 
 
 def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if args.threads is not None:
         torch.set_num_threads(args.threads)
+    if args.init_from is not None:
+        return run_polar(args)
+    args.epochs = 30 if args.epochs is None else args.epochs
+    args.batch_size = 16 if args.batch_size is None else args.batch_size
+    args.lr = 2e-3 if args.lr is None else args.lr
     try:
         train_frames = [frame for path in args.data for frame in read_dataset(path)]
         val_frames = read_dataset(args.val) if args.val else None
@@ -85,4 +104,42 @@ def run(args: argparse.Namespace) -> int:
             {"model": model_config.to_dict(), "train": asdict(config), "data": args.data, "val": args.val},
             indent=2, default=str) + "\n", encoding="utf-8")
     trainer.fit()
+    return 0
+
+
+def run_polar(args: argparse.Namespace) -> int:
+    """`--init-from`: fine-tune the polar YOLOX. Every input is checked before OUT is touched."""
+    out = Path(args.out)
+    defaults = FinetuneConfig()
+    try:
+        strip = {} if args.strip is None else dict(zip(("input_size", "polar_width", "polar_overlap"),
+                                                       args.strip, strict=True))
+        model_config = PolarDetectorConfig(**strip)
+        config = FinetuneConfig(
+            epochs=defaults.epochs if args.epochs is None else args.epochs,
+            batch_size=args.batch_size or defaults.batch_size, lr=args.lr or defaults.lr,
+            freeze=defaults.freeze if args.freeze is None else tuple(args.freeze),
+            distill=defaults.distill if args.distill is None else args.distill,
+            checkpoint_every_s=args.checkpoint_every or defaults.checkpoint_every_s,
+            seed=args.seed, val_limit=args.val_limit, device=args.device)
+        initial = init_from_pretrained(args.init_from, model_config)
+        train_frames = [frame for path in args.data for frame in read_dataset(path)]
+        val_frames = read_dataset(args.val) if args.val else None
+        names = ", ".join(Path(path).parent.name or str(path) for path in args.data)
+        finetuner = Finetuner(model_config, config, out, initial, train_frames, val_frames,
+                              f"{names} ({len(train_frames)} frames)", progress=not args.quiet)
+        if args.resume:
+            if not (out / LAST).exists():
+                raise ValueError(f"nothing to resume, {out / LAST} does not exist")
+            finetuner.resume(out / LAST)
+    except (DatasetFormatError, CheckpointError, ValueError) as error:  # PretrainedWeightsError too
+        print(f"fishloc train: {error}", file=sys.stderr)
+        return 2
+    if not args.resume:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "log.jsonl").unlink(missing_ok=True)
+        (out / "config.json").write_text(json.dumps(
+            {"model": model_config.to_dict(), "finetune": asdict(config), "init_from": args.init_from,
+             "data": args.data, "val": args.val}, indent=2, default=str) + "\n", encoding="utf-8")
+    finetuner.fit()
     return 0

@@ -1,0 +1,271 @@
+"""Fine-tuning of the polar YOLOX person detector on renders, without forgetting COCO.
+
+The student starts as the COCO person network (`init_from_pretrained`); a frozen copy of it, the
+teacher, scores every strip too, and the loss's `distill` term keeps the student's scores where no
+label says otherwise (`detector.yolox.loss`). The first backbone stages stay frozen (`freeze`).
+
+Checkpoints go to `OUT/last.pt` every `checkpoint_every_s` seconds and at each epoch's end, with
+weights, teacher, optimizer, schedule, RNG states, the epoch and the batch within it; the epoch's
+order comes from (seed, epoch) and augmentation from (seed, epoch, index), so `resume` continues the
+run exactly. Validation runs each epoch through the ONNX contract's module and the service's pre-
+and post-processing; `OUT/best.pt` keeps the best validation mAP (renders only).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import random
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from detector.checkpoint import Checkpoint, CheckpointError, ModelInfo, load_checkpoint, save_checkpoint
+from detector.data.readers import FrameAnnotations
+from detector.evaluate import eval_frames, json_safe, summarise, torch_predictor
+from detector.graph import contract_info, contract_module
+from detector.trainer import best_f1_threshold, resolve_device
+from detector.yolox.loss import PolarDetectionLoss, PolarLossConfig
+from detector.yolox.network import YoloxNano
+from detector.yolox.polar import PolarDetectorConfig, build_polar_network
+from detector.yolox.strips import PolarStripDataset, StripAugment, collate_strips
+
+LOG_FILE = "log.jsonl"
+LAST = "last.pt"
+BEST = "best.pt"
+TRAINER_KIND = "polar-finetune"
+STAGES = ("stem", "dark2", "dark3", "dark4", "dark5", "neck", "head")
+
+
+@dataclass(frozen=True)
+class FinetuneConfig:
+    epochs: int = 20
+    batch_size: int = 8
+    lr: float = 5e-4
+    weight_decay: float = 0.05  # on convolution weights only, not on biases (BatchNorm folded in)
+    warmup_steps: int = 100
+    final_lr_fraction: float = 0.05
+    grad_clip: float = 10.0
+    freeze: tuple[str, ...] = ("stem", "dark2", "dark3")  # of STAGES
+    distill: float = 1.0  # λ
+    iou_weight: float = 5.0
+    augment: StripAugment = field(default_factory=StripAugment)
+    checkpoint_every_s: float = 180.0
+    seed: int = 0
+    val_limit: int = 200
+    device: str = "auto"
+
+    def __post_init__(self) -> None:
+        unknown = set(self.freeze) - set(STAGES)
+        if unknown:
+            raise ValueError(f"freeze: unknown stages {sorted(unknown)}; choose from {', '.join(STAGES)}")
+
+
+def stage_parameters(model: YoloxNano, stage: str) -> list[nn.Parameter]:
+    owner: nn.Module = model.backbone if stage.startswith(("stem", "dark")) else model
+    module = owner.get_submodule(stage)
+    return list(module.parameters())
+
+
+def lr_factor(step: int, total: int, config: FinetuneConfig) -> float:
+    """Linear warm-up, then cosine decay to `final_lr_fraction`."""
+    if step < config.warmup_steps:
+        return (step + 1) / config.warmup_steps
+    progress = min(1.0, (step - config.warmup_steps) / max(1, total - config.warmup_steps))
+    cosine = 0.5 * (1 + math.cos(math.pi * progress))
+    return config.final_lr_fraction + (1 - config.final_lr_fraction) * cosine
+
+
+def rng_state() -> dict[str, Any]:
+    return {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate(),
+            "cuda": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None}
+
+
+def restore_rng(state: dict[str, Any]) -> None:
+    torch.set_rng_state(state["torch"])
+    np.random.set_state(state["numpy"])
+    random.setstate(state["python"])
+    if state.get("cuda") is not None and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(state["cuda"])
+
+
+class Finetuner:
+    """Fine-tunes `initial` (a person-only YoloxNano of `model_config`) into `out/`."""
+
+    def __init__(self, model_config: PolarDetectorConfig, config: FinetuneConfig, out: Path,
+                 initial: YoloxNano, train_frames: list[FrameAnnotations],
+                 val_frames: list[FrameAnnotations] | None = None, trained_on: str = "",
+                 progress: bool = True) -> None:
+        self.model_config = model_config
+        self.config = config
+        self.out = out
+        self.progress = progress
+        self.device = resolve_device(config.device)
+        torch.manual_seed(config.seed)
+        np.random.seed(config.seed)
+        random.seed(config.seed)
+        self.model = build_polar_network(model_config)
+        self.model.load_state_dict(initial.state_dict(), strict=True)
+        self.model.to(self.device)
+        self.teacher = copy.deepcopy(self.model).eval().requires_grad_(False)
+        frozen = {id(p) for stage in config.freeze for p in stage_parameters(self.model, stage)}
+        for parameter in self.model.parameters():
+            parameter.requires_grad_(id(parameter) not in frozen)
+        trainable = [p for p in self.model.parameters() if p.requires_grad]
+        self.optimizer = torch.optim.AdamW(
+            [{"params": [p for p in trainable if p.ndim > 1], "weight_decay": config.weight_decay},
+             {"params": [p for p in trainable if p.ndim <= 1], "weight_decay": 0.0}], lr=config.lr)
+        self.train_set = PolarStripDataset(train_frames, model_config, config.augment, config.seed)
+        self.val_frames = (val_frames or [])[:config.val_limit]
+        self.loss = PolarDetectionLoss(PolarLossConfig(iou_weight=config.iou_weight,
+                                                       distill_weight=config.distill))
+        self.steps_per_epoch = max(1, math.ceil(len(train_frames) / config.batch_size))
+        total = self.steps_per_epoch * config.epochs
+        self.scheduler = torch.optim.lr_scheduler.LambdaLR(
+            self.optimizer, lambda step: lr_factor(step, total, config))
+        self.epoch = 0  # epochs completed
+        self.batch = 0  # batches of the current epoch completed
+        self.step = 0
+        self.best_score = -math.inf
+        self.epoch_sums: dict[str, float] = {}
+        self.info = ModelInfo(model_version=f"{out.name}-e0", trained_on=trained_on or "unspecified",
+                              default_min_score=0.3)
+        self._saved_at = time.monotonic()
+
+    # ----- checkpoints
+
+    def checkpoint(self) -> Checkpoint:
+        state = {
+            "kind": TRAINER_KIND,
+            "optimizer": self.optimizer.state_dict(),
+            "scheduler": self.scheduler.state_dict(),
+            "teacher": {k: v.detach().cpu() for k, v in self.teacher.state_dict().items()},
+            "epoch": self.epoch, "batch": self.batch, "step": self.step,
+            "epoch_sums": dict(self.epoch_sums),
+            "best_score": self.best_score,
+            "rng": rng_state(),
+            "finetune_config": json_safe(asdict(self.config)),
+        }
+        weights = {k: v.detach().cpu().clone() for k, v in self.model.state_dict().items()}
+        return Checkpoint(self.model_config, weights, ModelInfo(**vars(self.info)), state)
+
+    def save_last(self) -> None:
+        save_checkpoint(self.out / LAST, self.checkpoint())
+        self._saved_at = time.monotonic()
+
+    def resume(self, path: Path) -> None:
+        """Continue a run of this configuration from its checkpoint; CheckpointError naming the
+        file for a checkpoint of another network, strip or trainer (nothing is written)."""
+        checkpoint = load_checkpoint(path)
+        state = checkpoint.training_state
+        if not isinstance(checkpoint.config, PolarDetectorConfig):
+            raise CheckpointError(f"{path} is a CenterNet (fisheye view) checkpoint, not the polar YOLOX "
+                                  "this run trains; resume it without --init-from")
+        if checkpoint.config != self.model_config:
+            raise CheckpointError(f"{path} was trained with {checkpoint.config.to_dict()}, this run asks "
+                                  f"for {self.model_config.to_dict()}; resume with the same --strip")
+        if state.get("kind") != TRAINER_KIND:
+            raise CheckpointError(f"{path} holds no fine-tuning state to resume from")
+        self.model.load_state_dict(checkpoint.build(path).state_dict())
+        self.teacher.load_state_dict(state["teacher"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.scheduler.load_state_dict(state["scheduler"])
+        self.epoch, self.batch, self.step = int(state["epoch"]), int(state["batch"]), int(state["step"])
+        self.epoch_sums = dict(state["epoch_sums"])
+        self.best_score = float(state["best_score"])
+        self.info = checkpoint.info
+        restore_rng(state["rng"])
+
+    # ----- loop
+
+    def batches(self, epoch: int) -> list[list[int]]:
+        """The batches of `epoch`: a permutation derived from (seed, epoch)."""
+        generator = torch.Generator().manual_seed(self.config.seed * 100003 + epoch)
+        order = torch.randperm(len(self.train_set), generator=generator).tolist()
+        size = self.config.batch_size
+        return [order[i:i + size] for i in range(0, len(order), size)]
+
+    def train_step(self, indices: list[int]) -> dict[str, float]:
+        images, labels = collate_strips([self.train_set[i] for i in indices])
+        images = images.to(self.device)
+        with torch.no_grad():
+            teacher_maps = self.teacher(images)
+        terms = self.loss(self.model(images), labels, teacher_maps)
+        self.optimizer.zero_grad(set_to_none=True)
+        terms["total"].backward()
+        torch.nn.utils.clip_grad_norm_([p for p in self.model.parameters() if p.requires_grad],
+                                       self.config.grad_clip)
+        self.optimizer.step()
+        self.scheduler.step()
+        self.step += 1
+        return {k: v.item() for k, v in terms.items()}
+
+    def validate(self) -> dict[str, Any]:
+        if not self.val_frames:
+            return {}
+        checkpoint = self.checkpoint()
+        module = contract_module(checkpoint).to(self.device)
+        frames = eval_frames(torch_predictor(module, contract_info(checkpoint)), self.val_frames)
+        metrics = summarise(frames, best_f1_threshold(frames))
+        return {k: v for k, v in metrics.items() if isinstance(v, float)}
+
+    def fit(self, stop_after_steps: int | None = None) -> list[dict[str, Any]]:
+        """Train until `config.epochs` are complete (or `stop_after_steps` optimizer steps in all,
+        leaving `last.pt` to resume from); returns this call's log records. With 0 epochs it writes
+        the unchanged initial network (the zero-shot model)."""
+        self.out.mkdir(parents=True, exist_ok=True)
+        if self.config.epochs == 0:
+            self.save_last()
+            return []
+        records: list[dict[str, Any]] = []
+        self.model.train()
+        while self.epoch < self.config.epochs:
+            self.train_set.set_epoch(self.epoch)
+            started = time.time()
+            batches = self.batches(self.epoch)
+            while self.batch < len(batches):
+                if stop_after_steps is not None and self.step >= stop_after_steps:
+                    self.save_last()
+                    return records
+                terms = self.train_step(batches[self.batch])
+                self.batch += 1
+                for key, value in terms.items():
+                    self.epoch_sums[key] = self.epoch_sums.get(key, 0.0) + value
+                if self.progress and self.step % 10 == 0:
+                    print(f"epoch {self.epoch + 1} batch {self.batch}/{len(batches)}: "
+                          f"{json.dumps({k: round(v, 4) for k, v in terms.items()})}", flush=True)
+                if time.monotonic() - self._saved_at >= self.config.checkpoint_every_s:
+                    self.save_last()
+            records.append(self._end_epoch(len(batches), time.time() - started))
+        return records
+
+    def _end_epoch(self, batch_count: int, seconds: float) -> dict[str, Any]:
+        train_terms = {k: v / batch_count for k, v in self.epoch_sums.items()}
+        val = self.validate()
+        self.epoch += 1
+        self.batch = 0
+        self.epoch_sums = {}
+        self.info.model_version = f"{self.out.name}-e{self.epoch}"
+        if "min_score" in val:
+            self.info.default_min_score = round(float(val["min_score"]), 3)
+        record = {"epoch": self.epoch, "step": self.step, "train": train_terms, "val": val,
+                  "lr": self.scheduler.get_last_lr()[0], "seconds": round(seconds, 1),
+                  "full_turn_labels_left_out": self.train_set.full_turns_left_out}
+        score = val.get("mAP", math.nan)
+        if math.isfinite(score) and score > self.best_score:
+            self.best_score = score
+            save_checkpoint(self.out / BEST, self.checkpoint())
+        self.save_last()
+        with open(self.out / LOG_FILE, "a", encoding="utf-8") as log:
+            log.write(json.dumps(json_safe(record), default=float) + "\n")
+        if self.progress:
+            summary = {k: round(v, 4) for k, v in {**train_terms, **val}.items()
+                       if k in ("total", "distill", "AP50", "mAP", "AP_near", "AP_mid", "AP_far", "recall")}
+            print(f"epoch {self.epoch}: {json.dumps(summary)} ({record['seconds']} s)", flush=True)
+        return record

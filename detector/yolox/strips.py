@@ -1,0 +1,213 @@
+"""Training strips of the polar YOLOX: annotated frames unwrapped as the service unwraps them.
+
+A frame is reduced as the service's JPEG decode would (`contract.reduce_like_decode`) and unwrapped
+by `contract.views.prepare_input` with the `PolarGrid` of `contract.views.polar_grid`, so training
+and serving share one grid. Its labels are `grid.radius_aligned_to_polar(boxes)` plus
+`EDGE_TO_CENTRE_PX` (YOLOX's pixel-edge coordinates). A box over the principal point (a person
+straight below the lens) covers the whole turn in the strip and is left out (counted).
+
+The unwrap of a frame is cached as one full turn without overlap (start angle 0). Rolling it by k
+columns is the unwrap with `start_rad = 2πk / width` exactly, so the random roll of the angle (nobody
+is always at the seam) costs a `np.roll`; the overlap columns are then the first ones repeated.
+Each copy of a label (its first-turn columns, and those plus `width` where they reach into the
+overlap) is kept where most of it lies inside the strip, and clipped to it.
+
+Augmentation is drawn from `np.random.default_rng((seed, epoch, index))`: reproducible per sample.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+import torch
+from numpy.typing import NDArray
+from torch import Tensor
+
+from contract import ModelInfo
+from contract.detect import reduce_like_decode
+from contract.views import min_decoded_side, polar_grid, prepare_input
+from detector.data.dataset import load_rgb
+from detector.data.readers import FrameAnnotations
+from detector.yolox.polar import EDGE_TO_CENTRE_PX, PolarDetectorConfig
+from fisheye.polar import PolarGrid
+
+FloatArray = NDArray[np.float64]
+log = logging.getLogger(__name__)
+
+MIN_VISIBLE = 0.5  # a label copy is kept where at least this fraction of its area lies in the strip
+MIN_SIDE_PX = 2.0  # labels thinner than this (strip px) are left out
+
+
+@dataclass(frozen=True)
+class StripAugment:
+    """Augmentation strengths; `StripAugment.none()` turns everything off."""
+
+    roll: bool = True  # random start angle of the turn
+    flip: float = 0.5  # probability of a left-right mirror
+    brightness: float = 0.4  # ± fraction
+    contrast: float = 0.4  # ± fraction
+    saturation: float = 0.5  # ± fraction
+    hue_deg: float = 12.0  # ± degrees
+    blur: float = 0.25  # probability of a Gaussian blur (σ up to 1.5 px)
+    jpeg: float = 0.3  # probability of a JPEG round trip (quality 25–85)
+
+    @classmethod
+    def none(cls) -> StripAugment:
+        return cls(roll=False, flip=0.0, brightness=0.0, contrast=0.0, saturation=0.0, hue_deg=0.0,
+                   blur=0.0, jpeg=0.0)
+
+
+def training_info(config: PolarDetectorConfig) -> ModelInfo:
+    """The contract metadata the strips are made by (only the view's geometry matters here)."""
+    return config.model_info("training", "training", 0.3)
+
+
+def full_turn_mask(grid: PolarGrid, xyxy: FloatArray) -> NDArray[np.bool_]:
+    """(N,) which strip boxes of `radius_aligned_to_polar` are a box over the principal point."""
+    return (xyxy[:, 2] - xyxy[:, 0]) >= grid.width - 1e-9
+
+
+def place_labels(xyxy: FloatArray, width: int, strip_wh: tuple[int, int]) -> FloatArray:
+    """(N, 4) strip boxes with first-turn centres -> (M, 4) label copies in the strip: each box and
+    its copy one turn (`width` columns) to the right, kept where ≥ MIN_VISIBLE of it lies inside
+    [−0.5, W − 0.5] × [−0.5, H − 0.5], clipped to it. Pixel-centre coordinates."""
+    if len(xyxy) == 0:
+        return np.zeros((0, 4))
+    copies = np.concatenate([xyxy, xyxy + np.array([width, 0.0, width, 0.0])])
+    low, high = np.array([-0.5, -0.5]), np.array(strip_wh, dtype=np.float64) - 0.5
+    clipped = np.concatenate([np.clip(copies[:, :2], low, high), np.clip(copies[:, 2:], low, high)], axis=1)
+    area = np.prod(np.maximum(copies[:, 2:] - copies[:, :2], 1e-9), axis=1)
+    sides = clipped[:, 2:] - clipped[:, :2]
+    visible = np.prod(np.maximum(sides, 0.0), axis=1) / area
+    keep = (visible >= MIN_VISIBLE) & np.all(sides >= MIN_SIDE_PX, axis=1)
+    return clipped[keep]
+
+
+def frame_strip(frame: FrameAnnotations, info: ModelInfo) -> tuple[NDArray[np.uint8], FloatArray, int]:
+    """A frame -> its full-turn strip (H, width, 3) RGB at start angle 0, its labels (N, 4) strip
+    px (first-turn centres, full turns left out) and how many full-turn labels were left out."""
+    if frame.camera is None or info.polar is None:
+        raise ValueError(f"{frame.path}: polar strips need the frame's camera and a polar model")
+    camera = frame.camera
+    turn_info = dataclasses.replace(info, polar=dataclasses.replace(info.polar, overlap=0))
+    reduced = reduce_like_decode(load_rgb(frame), min_decoded_side(turn_info, camera))
+    strip, _ = prepare_input(turn_info, reduced, camera)
+    grid = polar_grid(turn_info, camera)
+    xyxy = grid.radius_aligned_to_polar(frame.boxes_cxcywh).reshape(-1, 4)
+    full = full_turn_mask(grid, xyxy)
+    return strip, xyxy[~full], int(full.sum())
+
+
+def roll_strip(strip: NDArray[np.uint8], xyxy: FloatArray, shift: int, overlap: int
+               ) -> tuple[NDArray[np.uint8], FloatArray]:
+    """The full-turn strip started `shift` columns later (start angle + 2π·shift/width), with its
+    first `overlap` columns repeated at the right -> (H, width + overlap, 3) and the boxes'
+    first-turn columns (centres in [−0.5, width − 0.5))."""
+    width = strip.shape[1]
+    rolled = np.roll(strip, -shift, axis=1)
+    image = np.concatenate([rolled, rolled[:, :overlap]], axis=1)
+    centre = (xyxy[:, 0] + xyxy[:, 2]) / 2 - shift
+    move = np.floor((centre + 0.5) / width) * width + shift  # what takes the centre into the first turn
+    moved = xyxy - np.stack([move, np.zeros_like(move), move, np.zeros_like(move)], axis=1)
+    return np.ascontiguousarray(image), moved
+
+
+def photometric(image: NDArray[np.uint8], augment: StripAugment, rng: np.random.Generator
+                ) -> NDArray[np.uint8]:
+    """Brightness, contrast, saturation and hue jitter, blur and JPEG noise of an RGB image."""
+    out: NDArray[Any] = image.astype(np.float32)
+    if augment.brightness:
+        out *= 1.0 + rng.uniform(-augment.brightness, augment.brightness)
+    if augment.contrast:
+        mean = out.mean()
+        out = (out - mean) * (1.0 + rng.uniform(-augment.contrast, augment.contrast)) + mean
+    out = np.clip(out, 0, 255).astype(np.uint8)
+    if augment.saturation or augment.hue_deg:
+        hsv = cv2.cvtColor(out, cv2.COLOR_RGB2HSV).astype(np.float32)  # hue in [0, 180)
+        hsv[..., 0] = (hsv[..., 0] + rng.uniform(-augment.hue_deg, augment.hue_deg) / 2) % 180
+        hsv[..., 1] *= 1.0 + rng.uniform(-augment.saturation, augment.saturation)
+        out = cv2.cvtColor(np.clip(hsv, 0, [179, 255, 255]).astype(np.uint8), cv2.COLOR_HSV2RGB)
+    if rng.random() < augment.blur:
+        out = cv2.GaussianBlur(out, (0, 0), sigmaX=rng.uniform(0.5, 1.5))
+    if rng.random() < augment.jpeg:
+        quality = int(rng.integers(25, 86))
+        ok, encoded = cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, quality])
+        if ok:
+            out = np.asarray(cv2.imdecode(encoded, cv2.IMREAD_UNCHANGED))
+    return np.asarray(out, dtype=np.uint8)
+
+
+@dataclass(frozen=True)
+class StripSample:
+    """One strip: `image` (H, W, 3) uint8 RGB, `labels_xyxy` (N, 4) YOLOX coordinates (edge px)."""
+
+    image: NDArray[np.uint8]
+    labels_xyxy: FloatArray
+
+    def __post_init__(self) -> None:
+        if self.image.ndim != 3 or self.labels_xyxy.ndim != 2 or self.labels_xyxy.shape[1] != 4:
+            raise ValueError(f"image {self.image.shape}, labels {self.labels_xyxy.shape}")
+
+
+class PolarStripDataset:
+    """Annotated frames -> augmented StripSamples for a PolarDetectorConfig; `set_epoch` first."""
+
+    def __init__(self, frames: Sequence[FrameAnnotations], config: PolarDetectorConfig,
+                 augment: StripAugment | None = None, seed: int = 0, cache: bool = True) -> None:
+        self.frames = list(frames)
+        self.config = config
+        self.info = training_info(config)
+        self.augment = augment if augment is not None else StripAugment()
+        self.seed = seed
+        self.cache = cache
+        self.epoch = 0
+        self._strips: dict[int, tuple[NDArray[np.uint8], FloatArray]] = {}
+        self.full_turns_left_out = 0
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = epoch
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def base(self, index: int) -> tuple[NDArray[np.uint8], FloatArray]:
+        """The frame's full-turn strip and labels (strip px), cached when `cache`."""
+        if index in self._strips:
+            return self._strips[index]
+        strip, xyxy, full_turns = frame_strip(self.frames[index], self.info)
+        if full_turns:
+            log.info("%s: %d people over the principal point left out", self.frames[index].path, full_turns)
+        if self.cache:
+            self.full_turns_left_out += full_turns
+            self._strips[index] = (strip, xyxy)
+        return strip, xyxy
+
+    def __getitem__(self, index: int) -> StripSample:
+        strip, xyxy = self.base(index)
+        rng = np.random.default_rng((self.seed, self.epoch, index))
+        width = self.config.polar_width
+        shift = int(rng.integers(width)) if self.augment.roll else 0
+        image, xyxy = roll_strip(strip, xyxy, shift, self.config.polar_overlap)
+        labels = place_labels(xyxy, width, self.config.strip_wh)
+        if rng.random() < self.augment.flip:
+            image = np.ascontiguousarray(image[:, ::-1])
+            right = image.shape[1] - 1
+            x1, y1, x2, y2 = labels.T
+            labels = np.stack([right - x2, y1, right - x1, y2], axis=1)
+        image = photometric(image, self.augment, rng)
+        return StripSample(image, labels + EDGE_TO_CENTRE_PX)
+
+
+def collate_strips(samples: Sequence[StripSample]) -> tuple[Tensor, list[Tensor]]:
+    """Samples -> images (B, 3, H, W) float32 BGR 0-255 (what YoloxNano takes) and per-image
+    labels (N_i, 4) float32 xyxy in YOLOX coordinates."""
+    rgb = np.stack([s.image for s in samples])  # (B, H, W, 3)
+    images = torch.from_numpy(rgb).permute(0, 3, 1, 2).flip(1).float()  # (B, 3, H, W) BGR
+    labels = [torch.from_numpy(s.labels_xyxy.astype(np.float32)) for s in samples]
+    return images.contiguous(), labels

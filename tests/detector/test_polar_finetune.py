@@ -1,0 +1,264 @@
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import onnx
+import pytest
+import torch
+from onnx import TensorProto, helper
+
+from contract.views import polar_grid
+from detector.checkpoint import Checkpoint, load_checkpoint, save_checkpoint, save_release
+from detector.data.readers import FrameAnnotations, read_dataset
+from detector.model import tiny_config
+from detector.yolox.finetune import FinetuneConfig, Finetuner
+from detector.yolox.loss import PolarDetectionLoss, anchors_of, assign
+from detector.yolox.network import YoloxNano
+from detector.yolox.polar import EDGE_TO_CENTRE_PX, PolarDetectorConfig, init_from_pretrained
+from detector.yolox.strips import (
+    PolarStripDataset,
+    StripAugment,
+    collate_strips,
+    frame_strip,
+    place_labels,
+    roll_strip,
+    training_info,
+)
+from models import ASSETS_DIR
+from service.cli import main
+
+ONNX_PATH = ASSETS_DIR / "pretrained" / "yolox_nano.onnx"
+CONFIG = PolarDetectorConfig(input_size=64, polar_width=256, polar_overlap=32)
+STRIP = ["--strip", "64", "256", "32"]
+
+
+@pytest.fixture(scope="module")
+def pretrained() -> YoloxNano:
+    return init_from_pretrained(str(ONNX_PATH), CONFIG)
+
+
+# ----- labels
+
+
+@pytest.mark.parametrize("shift", [0, 37, 200])
+def test_rolled_strip_labels_map_back_to_the_frame_boxes(toy_dataset: Callable[..., Path],
+                                                         shift: int) -> None:
+    frame = read_dataset(toy_dataset(count=1, size=128, people=4))[0]
+    info = training_info(CONFIG)
+    strip, xyxy, full_turns = frame_strip(frame, info)
+    assert full_turns == 0 and len(xyxy) == 4
+    image, moved = roll_strip(strip, xyxy, shift, CONFIG.polar_overlap)
+    assert frame.camera is not None
+    start_rad = 2 * math.pi * shift / CONFIG.polar_width
+    grid = dataclasses.replace(polar_grid(info, frame.camera), start_rad=start_rad)
+    # A roll by k columns is the unwrap started 2πk/width later: its boxes map back alike.
+    assert image.shape == (64, 288, 3)
+    np.testing.assert_allclose(grid.polar_to_radius_aligned(moved), frame.boxes_cxcywh, atol=1e-6)
+    centres = (moved[:, 0] + moved[:, 2]) / 2
+    assert np.all((centres >= -0.5) & (centres < CONFIG.polar_width - 0.5))
+
+
+def test_roll_is_the_unwrap_with_a_later_start_angle() -> None:
+    rng = np.random.default_rng(0)
+    frame = rng.integers(0, 256, (96, 96, 3), dtype=np.uint8)
+    from fisheye.polar import PolarGrid
+
+    base = PolarGrid((47.5, 47.5), 45.0, 32, 64, 0)
+    rolled, _ = roll_strip(base.unwrap(frame), np.zeros((0, 4)), 10, 16)
+    direct = dataclasses.replace(base, start_rad=2 * math.pi * 10 / 64, overlap=16).unwrap(frame)
+    assert np.abs(rolled.astype(int) - direct.astype(int)).max() <= 1  # float maps, bilinear rounding
+
+
+def test_person_below_the_lens_is_left_out(toy_dataset: Callable[..., Path]) -> None:
+    frame = read_dataset(toy_dataset(count=1, size=128, people=2))[0]
+    below = np.array([[*frame.principal_point, 10.0, 20.0]])
+    frame = dataclasses.replace(
+        frame, boxes_cxcywh=np.concatenate([frame.boxes_cxcywh, below]),
+        locations_m=np.concatenate([frame.locations_m, [[0.0, 0.0]]]),
+        distances_m=np.append(frame.distances_m, 0.0),
+        visible_fraction=np.append(frame.visible_fraction, 1.0), bboxes_xywh=None, areas_px=None)
+    _, xyxy, full_turns = frame_strip(frame, training_info(CONFIG))
+    assert full_turns == 1 and len(xyxy) == 2
+
+
+@pytest.mark.parametrize(("boxes", "expected"), [
+    (np.zeros((0, 4)), np.zeros((0, 4))),
+    (np.array([[100.0, 10, 120, 40]]), np.array([[100.0, 10, 120, 40]])),  # middle: one copy
+    # across the seam: the left remnant (over half) and the whole copy in the overlap
+    (np.array([[-8.0, 10, 10, 40]]), np.array([[-0.5, 10, 10, 40], [248, 10, 266, 40]])),
+    # near the start: also whole in the overlap
+    (np.array([[2.0, 10, 20, 40]]), np.array([[2.0, 10, 20, 40], [258, 10, 276, 40]])),
+    # mostly past the top of the strip: dropped
+    (np.array([[100.0, -40, 120, 5]]), np.zeros((0, 4))),
+])
+def test_label_copies_at_the_seam(boxes: np.ndarray, expected: np.ndarray) -> None:
+    np.testing.assert_allclose(place_labels(boxes, 256, (288, 64)), expected.reshape(-1, 4))
+
+
+def test_samples_are_reproducible_and_flipped_labels_stay_in_the_strip(
+        toy_dataset: Callable[..., Path]) -> None:
+    frames = read_dataset(toy_dataset(count=2, size=128, people=3))
+    dataset = PolarStripDataset(frames, CONFIG, StripAugment(flip=1.0), seed=3)
+    dataset.set_epoch(1)
+    first, again = dataset[0], dataset[0]
+    np.testing.assert_array_equal(first.image, again.image)
+    np.testing.assert_array_equal(first.labels_xyxy, again.labels_xyxy)
+    dataset.set_epoch(2)
+    assert not np.array_equal(first.image, dataset[0].image)
+    labels = first.labels_xyxy - EDGE_TO_CENTRE_PX
+    assert len(labels) >= 3 and np.all(labels[:, :2] >= -0.5) and np.all(labels[:, 2] <= 287.5)
+    images, targets = collate_strips([first, dataset[1]])
+    assert images.shape == (2, 3, 64, 288) and len(targets) == 2
+
+
+# ----- loss
+
+
+def test_every_label_gets_a_positive_and_cells_go_to_the_smallest_box() -> None:
+    maps = [torch.zeros(1, 6, 64 // s, 288 // s) for s in (8, 16, 32)]
+    anchors = anchors_of(maps)
+    labels = torch.tensor([[10.0, 10, 14, 13], [0, 0, 60, 60], [20, 20, 44, 44]])
+    owner = assign(anchors, labels, 2.5)
+    assert set(owner[owner >= 0].tolist()) == {0, 1, 2}
+    small_cells = anchors.centres_xy[owner == 2]
+    assert torch.all((small_cells > 20) & (small_cells < 44))
+    assert (assign(anchors, torch.zeros(0, 4), 2.5) == -1).all()
+
+
+def test_distillation_is_zero_against_itself_and_the_loss_learns(
+        pretrained: YoloxNano, toy_dataset: Callable[..., Path]) -> None:
+    frames = read_dataset(toy_dataset(count=2, size=128, people=3))
+    dataset = PolarStripDataset(frames, CONFIG, StripAugment.none())
+    images, labels = collate_strips([dataset[0], dataset[1]])
+    student = init_from_pretrained(str(ONNX_PATH), CONFIG).train()
+    teacher = init_from_pretrained(str(ONNX_PATH), CONFIG).eval().requires_grad_(False)
+    loss = PolarDetectionLoss()
+    with torch.no_grad():
+        teacher_maps = teacher(images)
+    start = loss(student(images), labels, teacher_maps)
+    assert abs(start["distill"].item()) < 1e-6
+    assert set(start) == {"iou", "objectness", "class", "distill", "total"}
+    bias = student.get_parameter("head.obj_preds.0.bias")
+    with torch.no_grad():  # a different student: the term must see it
+        bias.add_(4.0)
+    assert loss(student(images), labels, teacher_maps)["distill"].item() > 1e-2
+    with torch.no_grad():
+        bias.sub_(4.0)
+    optimizer = torch.optim.AdamW(student.parameters(), lr=1e-3)
+    for _ in range(12):
+        terms = loss(student(images), labels, teacher_maps)
+        optimizer.zero_grad()
+        terms["total"].backward()  # type: ignore[no-untyped-call]
+        optimizer.step()
+    end = loss(student(images), labels, teacher_maps)
+    assert end["total"].item() < 0.75 * start["total"].item()
+    assert end["objectness"].item() < start["objectness"].item()
+    assert end["distill"].item() > 0  # it moved away from the teacher, and the term says so
+    assert all(p.grad is None for p in teacher.parameters())
+
+
+# ----- the loop
+
+
+def _finetuner(pretrained: YoloxNano, frames: list[FrameAnnotations], out: Path) -> Finetuner:
+    config = FinetuneConfig(epochs=2, batch_size=2, lr=1e-3, warmup_steps=2, seed=4, device="cpu",
+                            checkpoint_every_s=0.0)
+    return Finetuner(CONFIG, config, out, pretrained, frames, None, "toy", progress=False)
+
+
+def test_resume_mid_epoch_equals_training_straight(
+        pretrained: YoloxNano, toy_dataset: Callable[..., Path], tmp_path: Path) -> None:
+    frames = read_dataset(toy_dataset(count=4, size=128, people=2))
+    straight = _finetuner(pretrained, frames, tmp_path / "straight")
+    straight.fit()  # 2 epochs x 2 batches
+    first = _finetuner(pretrained, frames, tmp_path / "cut")
+    first.fit(stop_after_steps=1)  # stops inside epoch 1, leaving last.pt
+    resumed = _finetuner(pretrained, frames, tmp_path / "cut")
+    resumed.resume(tmp_path / "cut" / "last.pt")
+    assert (resumed.epoch, resumed.batch, resumed.step) == (0, 1, 1)
+    resumed.fit()
+    assert straight.step == resumed.step == 4
+    for key, value in straight.model.state_dict().items():
+        torch.testing.assert_close(resumed.model.state_dict()[key], value, atol=1e-6, rtol=0, msg=key)
+    trained, initial = straight.model.state_dict(), pretrained.state_dict()
+    assert any(not torch.equal(v, initial[k]) for k, v in trained.items())
+    frozen = [k for k in initial if k.startswith(("backbone.stem", "backbone.dark2", "backbone.dark3"))]
+    assert frozen and all(torch.equal(trained[k], initial[k]) for k in frozen)
+    last = [json.loads(line) for line in (tmp_path / "cut" / "log.jsonl").read_text().splitlines()]
+    assert [r["epoch"] for r in last] == [1, 2]
+
+
+def _cli(out: Path, data: Path, *extra: str) -> int:
+    return main(["train", "--init-from", str(ONNX_PATH), "--data", str(data), "--out", str(out),
+                 "--quiet", "--threads", "1", *STRIP, *extra])
+
+
+def test_cli_zero_epochs_validation_and_release(
+        pretrained: YoloxNano, toy_dataset: Callable[..., Path], tmp_path: Path) -> None:
+    data = toy_dataset(count=2, size=128, people=2)
+    out = tmp_path / "zero"
+    assert _cli(out, data, "--epochs", "0") == 0
+    zero_shot = load_checkpoint(out / "last.pt")
+    for key, value in pretrained.state_dict().items():
+        assert torch.equal(zero_shot.model_state[key], value), key
+    release = save_release(out / "last.pt", tmp_path / "release.pt")
+    assert release.training_state == {} and load_checkpoint(tmp_path / "release.pt").config == CONFIG
+    run = tmp_path / "one"
+    assert _cli(run, data, "--epochs", "1", "--batch-size", "2", "--val", str(data)) == 0
+    record = json.loads((run / "log.jsonl").read_text().splitlines()[0])
+    assert {"mAP", "AP50", "AP_near", "AP_mid", "AP_far", "recall"} <= set(record["val"])
+    assert set(record["train"]) == {"iou", "objectness", "class", "distill", "total"}
+    assert (run / "best.pt").exists() and load_checkpoint(run / "best.pt").config == CONFIG
+
+
+def _not_yolox(path: Path) -> Path:
+    weight = helper.make_tensor("w", TensorProto.FLOAT, [1, 3, 1, 1], [1.0, 1.0, 1.0])
+    graph = helper.make_graph([helper.make_node("Conv", ["x", "w"], ["y"])], "g",
+                              [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1, 3, 4, 4])],
+                              [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1, 1, 4, 4])], [weight])
+    onnx.save(helper.make_model(graph), str(path))
+    return path
+
+
+@pytest.mark.parametrize("kind", ["missing", "truncated", "not-yolox"])
+def test_bad_init_from_files(kind: str, toy_dataset: Callable[..., Path], tmp_path: Path,
+                             capsys: pytest.CaptureFixture[str]) -> None:
+    data = toy_dataset(count=1, size=128, people=1)
+    bad = tmp_path / f"{kind}.onnx"
+    if kind == "truncated":
+        bad.write_bytes(ONNX_PATH.read_bytes()[:5000])
+    elif kind == "not-yolox":
+        _not_yolox(bad)
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "last.pt").write_bytes(b"previous")
+    code = main(["train", "--init-from", str(bad), "--data", str(data), "--out", str(out), *STRIP])
+    assert code == 2
+    assert str(bad) in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == ["last.pt"]
+    assert (out / "last.pt").read_bytes() == b"previous"
+
+
+@pytest.mark.parametrize("other", ["strip", "centernet"])
+def test_resuming_another_configuration_fails_and_writes_nothing(
+        other: str, toy_dataset: Callable[..., Path], tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    data = toy_dataset(count=1, size=128, people=1)
+    out = tmp_path / "run"
+    if other == "strip":
+        wider = PolarDetectorConfig(input_size=64, polar_width=288, polar_overlap=32)
+        weights = init_from_pretrained(str(ONNX_PATH), CONFIG).state_dict()
+        save_checkpoint(out / "last.pt", Checkpoint(wider, weights))
+    else:
+        from detector.model import build_model
+        centernet = build_model(tiny_config(64)).state_dict()
+        save_checkpoint(out / "last.pt", Checkpoint(tiny_config(64), centernet))
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert _cli(out, data, "--resume") == 2
+    assert str(out / "last.pt") in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
