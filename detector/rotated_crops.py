@@ -91,7 +91,8 @@ class RotatedCropsPredictor:
             scores.append(crop_scores[inside])
         all_boxes = np.concatenate(boxes).reshape(-1, 4)
         all_scores = np.concatenate(scores)
-        kept = rotated_nms(all_boxes, all_scores, (u0, v0), self.nms_iou) if len(all_scores) else []
+        kept = (rotated_nms(all_boxes, all_scores, (u0, v0), self.nms_iou) if len(all_scores)
+                else np.zeros(0, dtype=np.int64))
         return FrameDetections(all_boxes[kept].reshape(-1, 4), all_scores[kept], (u0, v0))
 
     def detect(self, frames_rgb: Sequence[NDArray[np.uint8]], cameras: Sequence[FisheyeCamera],
