@@ -25,6 +25,7 @@ from detector.model import DetectorConfig, tiny_config
 from detector.trainer import LAST, TrainConfig, Trainer
 from detector.yolox.finetune import STAGES, FinetuneConfig, Finetuner
 from detector.yolox.polar import PolarDetectorConfig, init_from_pretrained
+from detector.yolox.strips import StripAugment
 
 MODEL_SIZES = {"default": DetectorConfig, "tiny": tiny_config}
 
@@ -58,6 +59,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="strip rows, columns per turn and overlap columns (default 416 1664 128)")
     polar.add_argument("--freeze", nargs="*", default=None, choices=STAGES,
                        help="network stages kept frozen (default: stem dark2 dark3; none: no stage)")
+    polar.add_argument("--zoom", type=float, nargs="+", default=[1.0], metavar="SCALE",
+                       help="strip radii (multiples of the served one) drawn per sample, e.g. 0.8 1 1.25 "
+                            "(each scale caches its own strips: memory grows with the count)")
     polar.add_argument("--distill", type=float, default=None, help="λ of the COCO distillation (default 1.0)")
     polar.add_argument("--checkpoint-every", type=float, default=None,
                        help="seconds between checkpoints to OUT/last.pt (default 180)")
@@ -121,7 +125,8 @@ def run_polar(args: argparse.Namespace) -> int:
             freeze=defaults.freeze if args.freeze is None else tuple(args.freeze),
             distill=defaults.distill if args.distill is None else args.distill,
             checkpoint_every_s=args.checkpoint_every or defaults.checkpoint_every_s,
-            seed=args.seed, val_limit=args.val_limit, device=args.device)
+            seed=args.seed, val_limit=args.val_limit, device=args.device,
+            augment=StripAugment(radius_scales=tuple(args.zoom)))
         initial = init_from_pretrained(args.init_from, model_config)
         train_frames = [frame for path in args.data for frame in read_dataset(path)]
         val_frames = read_dataset(args.val) if args.val else None

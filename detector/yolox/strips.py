@@ -56,6 +56,13 @@ class StripAugment:
     hue_deg: float = 12.0  # ± degrees
     blur: float = 0.25  # probability of a Gaussian blur (σ up to 1.5 px)
     jpeg: float = 0.3  # probability of a JPEG round trip (quality 25–85)
+    # Zoom: the strip's top row at this multiple of the served radius (people look smaller above
+    # 1, larger below); one is drawn per sample. Every scale caches its own strips.
+    radius_scales: tuple[float, ...] = (1.0,)
+
+    def __post_init__(self) -> None:
+        if not self.radius_scales or min(self.radius_scales) <= 0:
+            raise ValueError(f"radius_scales must be positive, got {self.radius_scales}")
 
     @classmethod
     def none(cls) -> StripAugment:
@@ -89,16 +96,25 @@ def place_labels(xyxy: FloatArray, width: int, strip_wh: tuple[int, int]) -> Flo
     return clipped[keep]
 
 
-def frame_strip(frame: FrameAnnotations, info: ModelInfo) -> tuple[NDArray[np.uint8], FloatArray, int]:
-    """A frame -> its full-turn strip (H, width, 3) RGB at start angle 0, its labels (N, 4) strip
-    px (first-turn centres, full turns left out) and how many full-turn labels were left out."""
+def frame_strip(frame: FrameAnnotations, info: ModelInfo, radius_scale: float = 1.0
+                ) -> tuple[NDArray[np.uint8], FloatArray, int]:
+    """A frame -> its full-turn strip (H, width, 3) RGB at start angle 0 (the served one, its radius
+    times `radius_scale`), its labels (N, 4) strip px (first-turn centres, full turns left out) and
+    how many full-turn labels were left out."""
     if frame.camera is None or info.polar is None:
         raise ValueError(f"{frame.path}: polar strips need the frame's camera and a polar model")
     camera = frame.camera
     turn_info = dataclasses.replace(info, polar=dataclasses.replace(info.polar, overlap=0))
     reduced = reduce_like_decode(load_rgb(frame), min_decoded_side(turn_info, camera))
-    strip, _ = prepare_input(turn_info, reduced, camera)
-    grid = polar_grid(turn_info, camera)
+    if radius_scale == 1.0:
+        strip, _ = prepare_input(turn_info, reduced, camera)
+        grid = polar_grid(turn_info, camera)
+    else:
+        grid = polar_grid(turn_info, camera)
+        grid = dataclasses.replace(grid, radius_px=grid.radius_px * radius_scale)
+        width, height = camera.image_size
+        scale_xy = (reduced.shape[1] / width, reduced.shape[0] / height)
+        strip = grid.unwrap(reduced, scale_xy, info.pad_value)
     xyxy = grid.radius_aligned_to_polar(frame.boxes_cxcywh).reshape(-1, 4)
     full = full_turn_mask(grid, xyxy)
     return strip, xyxy[~full], int(full.sum())
@@ -167,7 +183,7 @@ class PolarStripDataset:
         self.seed = seed
         self.cache = cache
         self.epoch = 0
-        self._strips: dict[int, tuple[NDArray[np.uint8], FloatArray]] = {}
+        self._strips: dict[tuple[int, float], tuple[NDArray[np.uint8], FloatArray]] = {}
         self.full_turns_left_out = 0
 
     def set_epoch(self, epoch: int) -> None:
@@ -176,21 +192,24 @@ class PolarStripDataset:
     def __len__(self) -> int:
         return len(self.frames)
 
-    def base(self, index: int) -> tuple[NDArray[np.uint8], FloatArray]:
+    def base(self, index: int, radius_scale: float = 1.0) -> tuple[NDArray[np.uint8], FloatArray]:
         """The frame's full-turn strip and labels (strip px), cached when `cache`."""
-        if index in self._strips:
-            return self._strips[index]
-        strip, xyxy, full_turns = frame_strip(self.frames[index], self.info)
+        key = (index, radius_scale)
+        if key in self._strips:
+            return self._strips[key]
+        strip, xyxy, full_turns = frame_strip(self.frames[index], self.info, radius_scale)
         if full_turns:
             log.info("%s: %d people over the principal point left out", self.frames[index].path, full_turns)
         if self.cache:
             self.full_turns_left_out += full_turns
-            self._strips[index] = (strip, xyxy)
+            self._strips[key] = (strip, xyxy)
         return strip, xyxy
 
     def __getitem__(self, index: int) -> StripSample:
-        strip, xyxy = self.base(index)
         rng = np.random.default_rng((self.seed, self.epoch, index))
+        scales = self.augment.radius_scales
+        scale = scales[int(rng.integers(len(scales)))] if len(scales) > 1 else scales[0]
+        strip, xyxy = self.base(index, scale)
         width = self.config.polar_width
         shift = int(rng.integers(width)) if self.augment.roll else 0
         image, xyxy = roll_strip(strip, xyxy, shift, self.config.polar_overlap)
