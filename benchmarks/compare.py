@@ -1,0 +1,201 @@
+"""The detector comparison of the README and the model card: one table from one script.
+
+    python -m benchmarks.compare --model "0.1.0=v010.onnx" \\
+        --model "zero-shot polar=models/fishloc-default.onnx" \\
+        --baseline "12 rotations=rotations:models/pretrained/yolox_nano.onnx" \\
+        --data real=../shared/real-frames/cepdof_lunch3.json --data r384=data/unseen384/annotations.json \\
+        --data r1024=data/unseen1024/annotations.json --frames data/unseen2952 --json compare.json
+
+Each model (a FishLoc ONNX file or training checkpoint) or zero-shot baseline (`rotations:ONNX`,
+`letterbox:ONNX`, `detector.baselines`) is evaluated on every data set exactly as `fishloc eval`
+does, then timed on the frames of `--frames` (encoded JPEGs of one size, as a camera sends them):
+*inference* is the model alone on its own input (p50), *end to end* the whole path from the JPEG
+bytes to floor positions (`service.pipeline.Pipeline.detect` for ONNX models, decode + predictor
+for the baselines; p50 and p95), interleaved model by model so that the machine's load hits them
+alike. Times are this machine's: compare rows of one run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from benchmarks.frames import FrameSet, load_frames
+from benchmarks.machine import machine_info
+from benchmarks.stats import summarize
+from contract import ModelRunner, OnnxModel, SessionThreads, min_decoded_side, prepare_input
+from detector.baselines import LetterboxPredictor, RotatedCropsPredictor
+from detector.data.readers import read_dataset
+from detector.evaluate import Predictor, RunnerPredictor, evaluate, json_safe, load_predictor
+from fisheye import FisheyeCamera, load_camera
+from models import DEMO_CAMERA_PATH
+from service.frame_decode import decode_frame, read_header
+from service.pipeline import Pipeline, PipelineConfig
+
+BASELINES: dict[str, Callable[[str, int], Predictor]] = {
+    "rotations": lambda path, threads: RotatedCropsPredictor(path, threads=threads),
+    "letterbox": lambda path, threads: LetterboxPredictor(path, threads=threads),
+}
+REAL_COLUMNS = ("AP50", "precision", "recall", "AP50_radius_aligned")
+RENDER_COLUMNS = ("AP50", "mAP", "AP_near", "AP_mid", "AP_far", "mPE")
+
+
+@dataclass
+class Entry:
+    """One row: a name, how to predict for evaluation, and how to time a frame end to end."""
+
+    name: str
+    predictor: Predictor
+    frame_ms: Callable[[bytes, FisheyeCamera], float]
+    inference_ms: Callable[[bytes, FisheyeCamera], float] | None
+
+
+def _timed(call: Callable[[], object]) -> float:
+    start = time.perf_counter()
+    call()
+    return (time.perf_counter() - start) * 1e3
+
+
+def _onnx_entry(name: str, path: str, threads: int) -> Entry:
+    model = OnnxModel(path, SessionThreads(intra_op=threads))
+    pipeline = Pipeline(model, PipelineConfig())
+    pipeline.warm_up()
+    inputs: dict[bytes, np.ndarray] = {}
+
+    def model_input(data: bytes, camera: FisheyeCamera) -> np.ndarray:
+        if data not in inputs:
+            frame_camera = camera.scaled_to(read_header(data).size_wh)
+            frame = decode_frame(data, min_decoded_side(model.info, frame_camera), 40_000_000)
+            inputs[data] = prepare_input(model.info, frame.rgb, frame_camera)[0]
+        return inputs[data]
+
+    return Entry(name, RunnerPredictor(ModelRunner(model)),
+                 lambda data, camera: _timed(lambda: pipeline.detect(data, camera)),
+                 lambda data, camera: _timed(lambda: model.run(model_input(data, camera))))
+
+
+def _predictor_entry(name: str, predictor: Predictor) -> Entry:
+    def frame_ms(data: bytes, camera: FisheyeCamera) -> float:
+        def run() -> None:
+            bgr = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_COLOR)
+            if bgr is None:
+                raise ValueError("OpenCV cannot decode a timing frame")
+            rgb = np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), dtype=np.uint8)
+            frame_camera = camera.scaled_to((rgb.shape[1], rgb.shape[0]))
+            predictor.detect([rgb], [frame_camera], predictor.default_min_score)
+        return _timed(run)
+
+    return Entry(name, predictor, frame_ms, None)
+
+
+def build_entry(name: str, spec: str, threads: int) -> Entry:
+    """`spec` is an ONNX file, a checkpoint, or `KIND:ONNX` for a zero-shot baseline."""
+    kind, _, path = spec.partition(":")
+    if kind in BASELINES and path:
+        return _predictor_entry(name, BASELINES[kind](path, threads))
+    if Path(spec).suffix.lower() == ".onnx":
+        return _onnx_entry(name, spec, threads)
+    return _predictor_entry(name, load_predictor(spec, threads=threads))
+
+
+def measure_times(entries: list[Entry], frames: FrameSet, camera: FisheyeCamera, runs: int,
+                  warmup: int) -> dict[str, dict[str, Any]]:
+    """Each entry's inference p50 and end-to-end p50/p95 (ms) over `runs` frames, interleaved."""
+    frame_times: dict[str, list[float]] = {e.name: [] for e in entries}
+    inference_times: dict[str, list[float]] = {e.name: [] for e in entries}
+    for index in range(warmup + runs):
+        data = frames.data[index % len(frames.data)]
+        for entry in entries:
+            elapsed = entry.frame_ms(data, camera)
+            alone = entry.inference_ms(data, camera) if entry.inference_ms is not None else None
+            if index >= warmup:
+                frame_times[entry.name].append(elapsed)
+                if alone is not None:
+                    inference_times[entry.name].append(alone)
+    report = {}
+    for entry in entries:
+        whole = summarize(frame_times[entry.name])
+        model_alone = inference_times[entry.name]
+        report[entry.name] = {"e2e_p50_ms": whole.p50, "e2e_p95_ms": whole.p95,
+                              "inference_p50_ms": summarize(model_alone).p50 if model_alone else None}
+    return report
+
+
+def _cell(value: Any, metre: bool = False) -> str:
+    if not isinstance(value, int | float) or value != value:
+        return "–"
+    return f"{value:.2f}" if metre else f"{value:.3f}"
+
+
+def markdown(rows: dict[str, dict[str, Any]], datasets: list[str]) -> str:
+    header = ["model"]
+    for data in datasets:
+        columns = REAL_COLUMNS if data.startswith("real") else RENDER_COLUMNS
+        header += [f"{data} {c}" + (" (m)" if c == "mPE" else "") for c in columns]
+    header += ["inference p50 (ms)", "end to end p50 (ms)", "end to end p95 (ms)"]
+    lines = ["| " + " | ".join(header) + " |", "|---" * len(header) + "|"]
+    for name, row in rows.items():
+        cells = [name]
+        for data in datasets:
+            metrics = row["metrics"].get(data, {})
+            columns = REAL_COLUMNS if data.startswith("real") else RENDER_COLUMNS
+            cells += [_cell(metrics.get(c), c == "mPE") for c in columns]
+        times = row.get("times", {})
+        cells += [_cell(times.get(k), True) if times.get(k) is not None else "–"
+                  for k in ("inference_p50_ms", "e2e_p50_ms", "e2e_p95_ms")]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--model", action="append", default=[], metavar="NAME=PATH",
+                        help="a FishLoc ONNX model or checkpoint (repeat)")
+    parser.add_argument("--baseline", action="append", default=[], metavar="NAME=KIND:ONNX",
+                        help="a zero-shot baseline: rotations:ONNX or letterbox:ONNX (repeat)")
+    parser.add_argument("--data", action="append", default=[], metavar="NAME=ANNOTATIONS",
+                        help="an evaluation set; names starting with 'real' get the real-frame columns")
+    parser.add_argument("--frames", default=None, help="folder of encoded frames of one size to time")
+    parser.add_argument("--camera", default=str(DEMO_CAMERA_PATH), help="camera of --frames (scaled)")
+    parser.add_argument("--runs", type=int, default=30)
+    parser.add_argument("--warmup", type=int, default=3)
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--json", default=None, help="write every figure here")
+    args = parser.parse_args(argv)
+    entries = []
+    for item in args.model + args.baseline:
+        name, _, spec = item.partition("=")
+        entries.append(build_entry(name, spec, args.threads))
+    datasets = [item.split("=", 1) for item in args.data]
+    rows: dict[str, dict[str, Any]] = {e.name: {"metrics": {}} for e in entries}
+    for data_name, path in datasets:
+        frames = read_dataset(path)
+        for entry in entries:
+            print(f"[compare] {entry.name} on {data_name}", file=sys.stderr)
+            rows[entry.name]["metrics"][data_name] = evaluate(entry.predictor, frames).metrics
+    if args.frames:
+        print(f"[compare] timing on {args.frames}", file=sys.stderr)
+        times = measure_times(entries, load_frames(args.frames), load_camera(args.camera), args.runs,
+                              args.warmup)
+        for name, figures in times.items():
+            rows[name]["times"] = figures
+    table = markdown(rows, [name for name, _ in datasets])
+    print(table)
+    if args.json:
+        record = {"machine": machine_info(args.threads).line(), "rows": rows, "table": table}
+        Path(args.json).write_text(json.dumps(json_safe(record), indent=2, default=str) + "\n",
+                                   encoding="utf-8")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
