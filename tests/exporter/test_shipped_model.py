@@ -1,0 +1,58 @@
+"""The shipped default model: its release checkpoint exports to the shipped ONNX (same metadata,
+same outputs on real strips of the sample frames), and the ONNX is what the service reads."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from contract import OnnxModel, SessionThreads, prepare_input
+from detector.checkpoint import load_checkpoint
+from detector.graph import contract_info
+from exporter.export import contract_model, export_onnx
+from exporter.parity import check_parity
+from fisheye import load_camera
+from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
+
+ROOT = Path(__file__).resolve().parents[2]
+RELEASE = ROOT / "models" / "fishloc-default.pt"
+
+
+def _sample_strips(model: OnnxModel) -> np.ndarray:
+    camera = load_camera(DEMO_CAMERA_PATH)
+    strips = []
+    for path in sorted((ROOT / "samples").glob("*.jpg")):
+        rgb = np.asarray(cv2.cvtColor(cv2.imread(str(path)), cv2.COLOR_BGR2RGB), dtype=np.uint8)
+        frame_camera = camera.scaled_to((rgb.shape[1], rgb.shape[0]))
+        strips.append(prepare_input(model.info, rgb, frame_camera)[0])
+    return np.stack(strips)
+
+
+def test_release_checkpoint_matches_the_shipped_onnx() -> None:
+    shipped = OnnxModel(DEFAULT_MODEL_PATH, SessionThreads(1))
+    checkpoint = load_checkpoint(RELEASE)
+    assert dataclasses.replace(shipped.info, sha256="") == contract_info(checkpoint)
+    assert shipped.info.view == "polar" and shipped.info.version == "0.2.0"
+    assert "Apache-2.0" in shipped.info.licence
+    module, _ = contract_model(checkpoint)
+    strips = _sample_strips(shipped)
+    report = check_parity(module, shipped, strips, shipped.info.default_min_score)
+    assert report.detections_above_threshold >= 10  # the sample frames' people, compared one by one
+
+
+@pytest.mark.slow
+def test_export_of_the_release_checkpoint_reproduces_the_shipped_onnx(tmp_path: Path) -> None:
+    shipped = OnnxModel(DEFAULT_MODEL_PATH, SessionThreads(1))
+    strips = _sample_strips(shipped)
+    report = export_onnx(load_checkpoint(RELEASE), tmp_path / "again.onnx", parity_frames=strips)
+    assert report.parity.detections_above_threshold >= 10
+    again = OnnxModel(tmp_path / "again.onnx", SessionThreads(1))
+    assert dataclasses.replace(again.info, sha256="") == dataclasses.replace(shipped.info, sha256="")
+    for ours, theirs in zip(again.run_batch(strips), shipped.run_batch(strips), strict=True):
+        np.testing.assert_allclose(ours.scores, theirs.scores, atol=1e-5)
+        top = theirs.scores >= 0.05
+        np.testing.assert_allclose(ours.boxes[top], theirs.boxes[top], atol=1e-2)
