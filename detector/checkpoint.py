@@ -16,10 +16,12 @@ import torch
 from torch import nn
 
 from detector.model import DetectorConfig, build_model
+from detector.yolox.fisheye import ARCH as FISHEYE_ARCH
+from detector.yolox.fisheye import FisheyeDetectorConfig, build_fisheye_network
 from detector.yolox.polar import ARCH as POLAR_ARCH
 from detector.yolox.polar import PolarDetectorConfig, build_polar_network
 
-NetworkConfig = DetectorConfig | PolarDetectorConfig
+NetworkConfig = DetectorConfig | PolarDetectorConfig | FisheyeDetectorConfig
 
 CHECKPOINT_FORMAT = "fishloc-checkpoint"
 CHECKPOINT_VERSION = 1
@@ -39,15 +41,19 @@ class ModelInfo:
 
 
 def build_network(config: NetworkConfig) -> nn.Module:
-    """The (untrained) network a config describes: the 0.1 CenterNet or the polar YOLOX."""
+    """The (untrained) network a config describes: the 0.1 CenterNet or a YOLOX (polar or fisheye)."""
     if isinstance(config, PolarDetectorConfig):
         return build_polar_network(config)
+    if isinstance(config, FisheyeDetectorConfig):
+        return build_fisheye_network(config)
     return build_model(config)
 
 
 def config_from_dict(record: dict[str, Any]) -> NetworkConfig:
     if record.get("arch") == POLAR_ARCH:
         return PolarDetectorConfig.from_dict(record)
+    if record.get("arch") == FISHEYE_ARCH:
+        return FisheyeDetectorConfig.from_dict(record)
     return DetectorConfig.from_dict(record)
 
 

@@ -14,6 +14,7 @@ from detector.checkpoint import ModelInfo as CheckpointInfo
 from detector.data.dataset import PAD_VALUE
 from detector.decode import decode
 from detector.model import DetectorConfig, FishLocNet
+from detector.yolox.fisheye import FisheyeContract, FisheyeDetectorConfig
 from detector.yolox.network import YoloxNano
 from detector.yolox.polar import PolarContract, PolarDetectorConfig
 
@@ -43,7 +44,7 @@ def centernet_info(config: DetectorConfig, info: CheckpointInfo) -> ModelInfo:
 def contract_info(checkpoint: Checkpoint) -> ModelInfo:
     """The contract metadata that `checkpoint`'s export carries (and evaluation reads it by)."""
     config, info = checkpoint.config, checkpoint.info
-    if isinstance(config, PolarDetectorConfig):
+    if isinstance(config, PolarDetectorConfig | FisheyeDetectorConfig):
         return config.model_info(info.model_version, info.trained_on, info.default_min_score)
     return centernet_info(config, info)
 
@@ -53,6 +54,8 @@ def contract_module(checkpoint: Checkpoint, source: str = "<memory>") -> nn.Modu
     network = checkpoint.build(source)
     if isinstance(network, YoloxNano) and isinstance(checkpoint.config, PolarDetectorConfig):
         return PolarContract(network, checkpoint.config.max_detections).eval()
+    if isinstance(network, YoloxNano) and isinstance(checkpoint.config, FisheyeDetectorConfig):
+        return FisheyeContract(network, checkpoint.config.max_detections).eval()
     if isinstance(network, FishLocNet):
         return ContractModel(network).eval()
     raise TypeError(f"no contract module for {type(network).__name__}")

@@ -5,6 +5,8 @@
     fishloc train --data mine.json --out runs/ft --init models/default.pt   # fine-tune
     fishloc train --init-from models/pretrained/yolox_nano.onnx --data A.json --val V.json \
         --out runs/polar [--strip 416 1664 128] [--distill 1.0] [--resume]   # the polar YOLOX
+    fishloc train --init-from models/pretrained/yolox_nano.onnx --view fisheye --data A.json \
+        --val V.json --out runs/fisheye [--input-size 640] [--no-rotation-aug]  # YOLOX on the frame
 """
 
 from __future__ import annotations
@@ -23,7 +25,9 @@ from detector.data.readers import DatasetFormatError, read_dataset
 from detector.losses import LossConfig
 from detector.model import DetectorConfig, tiny_config
 from detector.trainer import LAST, TrainConfig, Trainer
-from detector.yolox.finetune import STAGES, FinetuneConfig, Finetuner
+from detector.yolox.finetune import STAGES, FinetuneConfig, Finetuner, YoloxDetectorConfig
+from detector.yolox.fisheye import FisheyeDetectorConfig
+from detector.yolox.frames import FrameAugment
 from detector.yolox.polar import PolarDetectorConfig, init_from_pretrained
 from detector.yolox.strips import StripAugment
 
@@ -44,7 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model-size", choices=sorted(MODEL_SIZES), default="default")
     parser.add_argument("--equivariance", action=argparse.BooleanOptionalAction, default=True,
                         help="LOAF's rotation-equivariant loss term (λ = 0.5)")
-    parser.add_argument("--rotation-aug", action="store_true", help="rotate input frames at random")
+    parser.add_argument("--rotation-aug", action=argparse.BooleanOptionalAction, default=None,
+                        help="rotate input frames at random (default: off for the CenterNet, on for "
+                             "--view fisheye)")
     parser.add_argument("--no-flip", action="store_true", help="no left-right flips")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--val-limit", type=int, default=200, help="validate on the first N frames")
@@ -52,9 +58,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threads", type=int, default=None,
                         help="torch intra-op threads (on a busy CPU, 1 is often fastest)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
-    polar = parser.add_argument_group("polar YOLOX (fine-tuned from COCO YOLOX-Nano)")
+    polar = parser.add_argument_group("YOLOX, polar or fisheye view (fine-tuned from COCO YOLOX-Nano)")
     polar.add_argument("--init-from", default=None, metavar="PATH.onnx",
-                       help="YOLOX-Nano's COCO ONNX: fine-tune the polar person detector from it")
+                       help="YOLOX-Nano's COCO ONNX: fine-tune a person detector from it")
+    polar.add_argument("--view", choices=("polar", "fisheye"), default=None,
+                       help="what the YOLOX reads: the polar unwrap (default) or the letterboxed frame "
+                            "with a radius-aligned head (--input-size, default 640)")
     polar.add_argument("--strip", type=int, nargs=3, default=None, metavar=("HEIGHT", "WIDTH", "OVERLAP"),
                        help="strip rows, columns per turn and overlap columns (default 416 1664 128)")
     polar.add_argument("--freeze", nargs="*", default=None, choices=STAGES,
@@ -73,6 +82,9 @@ def run(args: argparse.Namespace) -> int:
         torch.set_num_threads(args.threads)
     if args.init_from is not None:
         return run_polar(args)
+    if args.view is not None:
+        print("fishloc train: --view needs --init-from (the COCO YOLOX-Nano to fine-tune)", file=sys.stderr)
+        return 2
     args.epochs = 30 if args.epochs is None else args.epochs
     args.batch_size = 16 if args.batch_size is None else args.batch_size
     args.lr = 2e-3 if args.lr is None else args.lr
@@ -89,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     config = TrainConfig(
         epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
-        augment=AugmentConfig(rotation=args.rotation_aug, flip=not args.no_flip),
+        augment=AugmentConfig(rotation=bool(args.rotation_aug), flip=not args.no_flip),
         loss=LossConfig(equivariance=args.equivariance), val_limit=args.val_limit, device=args.device,
     )
     names = ", ".join(Path(path).parent.name or str(path) for path in args.data)
@@ -111,14 +123,27 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def yolox_view(args: argparse.Namespace) -> tuple[YoloxDetectorConfig, StripAugment | FrameAugment]:
+    """The network config and augmentation of `--view`; ValueError for flags of the other view."""
+    if args.view == "fisheye":
+        if args.strip is not None or args.zoom != [1.0]:
+            raise ValueError("--strip and --zoom are options of the polar view, not of --view fisheye")
+        size = {} if args.input_size is None else {"input_size": args.input_size}
+        rotation = True if args.rotation_aug is None else args.rotation_aug
+        flip = 0.0 if args.no_flip else FrameAugment().flip
+        return FisheyeDetectorConfig(**size), FrameAugment(rotation=rotation, flip=flip)
+    strip = {} if args.strip is None else dict(zip(("input_size", "polar_width", "polar_overlap"),
+                                                   args.strip, strict=True))
+    return PolarDetectorConfig(**strip), StripAugment(radius_scales=tuple(args.zoom))
+
+
 def run_polar(args: argparse.Namespace) -> int:
-    """`--init-from`: fine-tune the polar YOLOX. Every input is checked before OUT is touched."""
+    """`--init-from`: fine-tune the YOLOX of `--view` (polar by default). Every input is checked
+    before OUT is touched."""
     out = Path(args.out)
     defaults = FinetuneConfig()
     try:
-        strip = {} if args.strip is None else dict(zip(("input_size", "polar_width", "polar_overlap"),
-                                                       args.strip, strict=True))
-        model_config = PolarDetectorConfig(**strip)
+        model_config, augment = yolox_view(args)
         config = FinetuneConfig(
             epochs=defaults.epochs if args.epochs is None else args.epochs,
             batch_size=args.batch_size or defaults.batch_size, lr=args.lr or defaults.lr,
@@ -126,7 +151,7 @@ def run_polar(args: argparse.Namespace) -> int:
             distill=defaults.distill if args.distill is None else args.distill,
             checkpoint_every_s=args.checkpoint_every or defaults.checkpoint_every_s,
             seed=args.seed, val_limit=args.val_limit, device=args.device,
-            augment=StripAugment(radius_scales=tuple(args.zoom)))
+            augment=augment)
         initial = init_from_pretrained(args.init_from, model_config)
         train_frames = [frame for path in args.data for frame in read_dataset(path)]
         val_frames = read_dataset(args.val) if args.val else None

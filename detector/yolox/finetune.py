@@ -1,4 +1,6 @@
-"""Fine-tuning of the polar YOLOX person detector on renders, without forgetting COCO.
+"""Fine-tuning of a YOLOX person detector on renders, without forgetting COCO: the polar view
+(design (a), `PolarStripDataset`) or the letterboxed fisheye frame (design (b),
+`FisheyeFrameDataset`), chosen by the network config's arch (`training_set`).
 
 The student starts as the COCO person network (`init_from_pretrained`); a frozen copy of it, the
 teacher, scores every strip too, and the loss's `distill` term keeps the student's scores where no
@@ -20,7 +22,7 @@ import random
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import torch
@@ -31,15 +33,20 @@ from detector.data.readers import FrameAnnotations
 from detector.evaluate import eval_frames, json_safe, summarise, torch_predictor
 from detector.graph import contract_info, contract_module
 from detector.trainer import best_f1_threshold, resolve_device
+from detector.yolox.fisheye import ARCH as FISHEYE_ARCH
+from detector.yolox.fisheye import FisheyeDetectorConfig
+from detector.yolox.frames import FisheyeFrameDataset, FrameAugment
 from detector.yolox.loss import PolarDetectionLoss, PolarLossConfig
 from detector.yolox.network import YoloxNano
-from detector.yolox.polar import PolarDetectorConfig, build_polar_network
-from detector.yolox.strips import PolarStripDataset, StripAugment, collate_strips
+from detector.yolox.polar import ARCH as POLAR_ARCH
+from detector.yolox.polar import PolarDetectorConfig
+from detector.yolox.strips import PolarStripDataset, StripAugment, YoloxSample, collate_strips
 
 LOG_FILE = "log.jsonl"
 LAST = "last.pt"
 BEST = "best.pt"
-TRAINER_KIND = "polar-finetune"
+TRAINER_KINDS = {POLAR_ARCH: "polar-finetune", FISHEYE_ARCH: "fisheye-finetune"}
+VIEWS = {POLAR_ARCH: "polar", FISHEYE_ARCH: "fisheye"}  # `fishloc train --view`
 STAGES = ("stem", "dark2", "dark3", "dark4", "dark5", "neck", "head")
 
 
@@ -55,7 +62,7 @@ class FinetuneConfig:
     freeze: tuple[str, ...] = ("stem", "dark2", "dark3")  # of STAGES
     distill: float = 1.0  # λ
     iou_weight: float = 5.0
-    augment: StripAugment = field(default_factory=StripAugment)
+    augment: StripAugment | FrameAugment = field(default_factory=StripAugment)  # of the view trained
     checkpoint_every_s: float = 180.0
     seed: int = 0
     val_limit: int = 200
@@ -65,6 +72,33 @@ class FinetuneConfig:
         unknown = set(self.freeze) - set(STAGES)
         if unknown:
             raise ValueError(f"freeze: unknown stages {sorted(unknown)}; choose from {', '.join(STAGES)}")
+
+
+YoloxDetectorConfig = PolarDetectorConfig | FisheyeDetectorConfig
+
+
+class TrainingSet(Protocol):
+    """What the loop reads of a view's dataset (PolarStripDataset, FisheyeFrameDataset)."""
+
+    def set_epoch(self, epoch: int) -> None: ...
+
+    def __len__(self) -> int: ...
+
+    def __getitem__(self, index: int) -> YoloxSample: ...
+
+    def left_out(self) -> dict[str, int]: ...
+
+
+def training_set(model_config: YoloxDetectorConfig, frames: list[FrameAnnotations],
+                 augment: StripAugment | FrameAugment, seed: int) -> TrainingSet:
+    """The dataset of `model_config`'s view; ValueError for the other view's augmentation."""
+    if isinstance(model_config, FisheyeDetectorConfig):
+        if not isinstance(augment, FrameAugment):
+            raise ValueError(f"the fisheye view is augmented by a FrameAugment, not {type(augment).__name__}")
+        return FisheyeFrameDataset(frames, model_config, augment, seed)
+    if not isinstance(augment, StripAugment):
+        raise ValueError(f"the polar view is augmented by a StripAugment, not {type(augment).__name__}")
+    return PolarStripDataset(frames, model_config, augment, seed)
 
 
 def stage_parameters(model: YoloxNano, stage: str) -> list[nn.Parameter]:
@@ -96,9 +130,9 @@ def restore_rng(state: dict[str, Any]) -> None:
 
 
 class Finetuner:
-    """Fine-tunes `initial` (a person-only YoloxNano of `model_config`) into `out/`."""
+    """Fine-tunes `initial` (a person-only YoloxNano of `model_config`, either view) into `out/`."""
 
-    def __init__(self, model_config: PolarDetectorConfig, config: FinetuneConfig, out: Path,
+    def __init__(self, model_config: YoloxDetectorConfig, config: FinetuneConfig, out: Path,
                  initial: YoloxNano, train_frames: list[FrameAnnotations],
                  val_frames: list[FrameAnnotations] | None = None, trained_on: str = "",
                  progress: bool = True) -> None:
@@ -110,7 +144,7 @@ class Finetuner:
         torch.manual_seed(config.seed)
         np.random.seed(config.seed)
         random.seed(config.seed)
-        self.model = build_polar_network(model_config)
+        self.model = YoloxNano(model_config.yolox)
         self.model.load_state_dict(initial.state_dict(), strict=True)
         self.model.to(self.device)
         self.teacher = copy.deepcopy(self.model).eval().requires_grad_(False)
@@ -121,7 +155,8 @@ class Finetuner:
         self.optimizer = torch.optim.AdamW(
             [{"params": [p for p in trainable if p.ndim > 1], "weight_decay": config.weight_decay},
              {"params": [p for p in trainable if p.ndim <= 1], "weight_decay": 0.0}], lr=config.lr)
-        self.train_set = PolarStripDataset(train_frames, model_config, config.augment, config.seed)
+        self.train_set = training_set(model_config, train_frames, config.augment, config.seed)
+        self.kind = TRAINER_KINDS[model_config.arch]
         self.val_frames = (val_frames or [])[:config.val_limit]
         self.loss = PolarDetectionLoss(PolarLossConfig(iou_weight=config.iou_weight,
                                                        distill_weight=config.distill))
@@ -142,7 +177,7 @@ class Finetuner:
 
     def checkpoint(self) -> Checkpoint:
         state = {
-            "kind": TRAINER_KIND,
+            "kind": self.kind,
             "optimizer": self.optimizer.state_dict(),
             "scheduler": self.scheduler.state_dict(),
             "teacher": {k: v.detach().cpu() for k, v in self.teacher.state_dict().items()},
@@ -164,13 +199,19 @@ class Finetuner:
         file for a checkpoint of another network, strip or trainer (nothing is written)."""
         checkpoint = load_checkpoint(path)
         state = checkpoint.training_state
-        if not isinstance(checkpoint.config, PolarDetectorConfig):
-            raise CheckpointError(f"{path} is a CenterNet (fisheye view) checkpoint, not the polar YOLOX "
+        mine = self.model_config
+        if not isinstance(checkpoint.config, PolarDetectorConfig | FisheyeDetectorConfig):
+            raise CheckpointError(f"{path} is a CenterNet (fisheye view) checkpoint, not the {mine.arch} "
                                   "this run trains; resume it without --init-from")
-        if checkpoint.config != self.model_config:
+        if checkpoint.config.arch != mine.arch:
+            theirs = checkpoint.config.arch
+            raise CheckpointError(f"{path} is a {theirs} checkpoint (--view {VIEWS[theirs]}), not the "
+                                  f"{mine.arch} this run trains; resume it with --view {VIEWS[theirs]}")
+        if checkpoint.config != mine:
+            flag = "--strip" if isinstance(mine, PolarDetectorConfig) else "--input-size"
             raise CheckpointError(f"{path} was trained with {checkpoint.config.to_dict()}, this run asks "
-                                  f"for {self.model_config.to_dict()}; resume with the same --strip")
-        if state.get("kind") != TRAINER_KIND:
+                                  f"for {mine.to_dict()}; resume with the same {flag}")
+        if state.get("kind") != self.kind:
             raise CheckpointError(f"{path} holds no fine-tuning state to resume from")
         self.model.load_state_dict(checkpoint.build(path).state_dict())
         self.teacher.load_state_dict(state["teacher"])
@@ -256,7 +297,7 @@ class Finetuner:
             self.info.default_min_score = round(float(val["min_score"]), 3)
         record = {"epoch": self.epoch, "step": self.step, "train": train_terms, "val": val,
                   "lr": self.scheduler.get_last_lr()[0], "seconds": round(seconds, 1),
-                  "full_turn_labels_left_out": self.train_set.full_turns_left_out}
+                  **self.train_set.left_out()}
         score = val.get("mAP", math.nan)
         if math.isfinite(score) and score > self.best_score:
             self.best_score = score

@@ -8,7 +8,7 @@ strips in, the top `max_detections` person boxes (`xyxy` strip px) and scores ou
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
-from typing import Any
+from typing import Any, Protocol
 
 import torch
 from torch import Tensor, nn
@@ -97,7 +97,20 @@ class PolarContract(nn.Module):
         return torch.cat([centre - half, centre + half], dim=-1), top_scores
 
 
-def init_from_pretrained(path: str, config: PolarDetectorConfig) -> YoloxNano:
+class YoloxSize(Protocol):
+    """What `init_from_pretrained` reads of a detector config (polar or fisheye view)."""
+
+    @property
+    def num_classes(self) -> int: ...
+
+    @property
+    def depth(self) -> float: ...
+
+    @property
+    def width(self) -> float: ...
+
+
+def init_from_pretrained(path: str, config: YoloxSize) -> YoloxNano:
     """The COCO YOLOX-Nano of an ONNX file, its head cut to the person class: the starting point
     of fine-tuning and the zero-shot baseline. PretrainedWeightsError naming the file if unusable."""
     from detector.yolox.network import PERSON, keep_classes

@@ -21,7 +21,7 @@ import dataclasses
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import cv2
 import numpy as np
@@ -134,7 +134,29 @@ def roll_strip(strip: NDArray[np.uint8], xyxy: FloatArray, shift: int, overlap: 
     return np.ascontiguousarray(image), moved
 
 
-def photometric(image: NDArray[np.uint8], augment: StripAugment, rng: np.random.Generator
+class Photometric(Protocol):
+    """The photometric strengths `photometric` reads (of a StripAugment or a frames.FrameAugment)."""
+
+    @property
+    def brightness(self) -> float: ...
+
+    @property
+    def contrast(self) -> float: ...
+
+    @property
+    def saturation(self) -> float: ...
+
+    @property
+    def hue_deg(self) -> float: ...
+
+    @property
+    def blur(self) -> float: ...
+
+    @property
+    def jpeg(self) -> float: ...
+
+
+def photometric(image: NDArray[np.uint8], augment: Photometric, rng: np.random.Generator
                 ) -> NDArray[np.uint8]:
     """Brightness, contrast, saturation and hue jitter, blur and JPEG noise of an RGB image."""
     out: NDArray[Any] = image.astype(np.float32)
@@ -192,6 +214,10 @@ class PolarStripDataset:
     def __len__(self) -> int:
         return len(self.frames)
 
+    def left_out(self) -> dict[str, int]:
+        """Counters for the epoch's log record."""
+        return {"full_turn_labels_left_out": self.full_turns_left_out}
+
     def base(self, index: int, radius_scale: float = 1.0) -> tuple[NDArray[np.uint8], FloatArray]:
         """The frame's full-turn strip and labels (strip px), cached when `cache`."""
         key = (index, radius_scale)
@@ -223,7 +249,17 @@ class PolarStripDataset:
         return StripSample(image, labels + EDGE_TO_CENTRE_PX)
 
 
-def collate_strips(samples: Sequence[StripSample]) -> tuple[Tensor, list[Tensor]]:
+class YoloxSample(Protocol):
+    """A training sample of either view: `image` (H, W, 3) uint8 RGB, `labels_xyxy` (N, 4) edge px."""
+
+    @property
+    def image(self) -> NDArray[np.uint8]: ...
+
+    @property
+    def labels_xyxy(self) -> FloatArray: ...
+
+
+def collate_strips(samples: Sequence[YoloxSample]) -> tuple[Tensor, list[Tensor]]:
     """Samples -> images (B, 3, H, W) float32 BGR 0-255 (what YoloxNano takes) and per-image
     labels (N_i, 4) float32 xyxy in YOLOX coordinates."""
     rgb = np.stack([s.image for s in samples])  # (B, H, W, 3)
