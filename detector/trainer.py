@@ -29,6 +29,7 @@ from detector.losses import DetectionLoss, LossConfig
 from detector.metrics import pr_curve
 from detector.model import DetectorConfig, FishLocNet, build_model
 from detector.plots import plot_training
+from detector.schedule import restore_rng, rng_state, warmup_cosine
 
 LOG_FILE = "log.jsonl"
 LAST = "last.pt"
@@ -55,30 +56,6 @@ def resolve_device(name: str) -> torch.device:
     if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     return torch.device(name)
-
-
-def _lr_factor(step: int, total: int, config: TrainConfig) -> float:
-    """Linear warm-up, then cosine decay to `final_lr_fraction`."""
-    if step < config.warmup_steps:
-        return (step + 1) / config.warmup_steps
-    progress = min(1.0, (step - config.warmup_steps) / max(1, total - config.warmup_steps))
-    cosine = 0.5 * (1 + math.cos(math.pi * progress))
-    return config.final_lr_fraction + (1 - config.final_lr_fraction) * cosine
-
-
-def _rng_state(angle_generator: torch.Generator) -> dict[str, Any]:
-    return {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate(),
-            "angles": angle_generator.get_state(),
-            "cuda": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None}
-
-
-def _restore_rng(state: dict[str, Any], angle_generator: torch.Generator) -> None:
-    torch.set_rng_state(state["torch"])
-    np.random.set_state(state["numpy"])
-    random.setstate(state["python"])
-    angle_generator.set_state(state["angles"])
-    if state.get("cuda") is not None and torch.cuda.is_available():
-        torch.cuda.set_rng_state_all(state["cuda"])
 
 
 def best_f1_threshold(frames: list[Any]) -> float:
@@ -116,7 +93,8 @@ class Trainer:
         self.steps_per_epoch = max(1, math.ceil(len(train_frames) / config.batch_size))
         total = self.steps_per_epoch * config.epochs
         self.scheduler = torch.optim.lr_scheduler.LambdaLR(
-            self.optimizer, lambda step: _lr_factor(step, total, config))
+            self.optimizer,
+            lambda step: warmup_cosine(step, total, config.warmup_steps, config.final_lr_fraction))
         self.angle_generator = torch.Generator().manual_seed(config.seed + 1)
         self.epoch = 0  # epochs completed
         self.best_score = -math.inf
@@ -131,7 +109,7 @@ class Trainer:
             "scheduler": self.scheduler.state_dict(),
             "epoch": self.epoch,
             "best_score": self.best_score,
-            "rng": _rng_state(self.angle_generator),
+            "rng": rng_state({"angles": self.angle_generator}),
             "train_config": asdict(self.config),
         }
         model_state = {k: v.detach().cpu() for k, v in self.model.state_dict().items()}
@@ -150,7 +128,7 @@ class Trainer:
         self.epoch = int(state["epoch"])
         self.best_score = float(state["best_score"])
         self.info = checkpoint.info
-        _restore_rng(state["rng"], self.angle_generator)
+        restore_rng(state["rng"], {"angles": self.angle_generator})
 
     # ----- loop
 

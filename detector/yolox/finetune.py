@@ -32,6 +32,7 @@ from detector.checkpoint import Checkpoint, CheckpointError, ModelInfo, load_che
 from detector.data.readers import FrameAnnotations
 from detector.evaluate import eval_frames, json_safe, summarise, torch_predictor
 from detector.graph import contract_info, contract_module
+from detector.schedule import restore_rng, rng_state, warmup_cosine
 from detector.trainer import best_f1_threshold, resolve_device
 from detector.yolox.fisheye import ARCH as FISHEYE_ARCH
 from detector.yolox.fisheye import FisheyeDetectorConfig
@@ -107,28 +108,6 @@ def stage_parameters(model: YoloxNano, stage: str) -> list[nn.Parameter]:
     return list(module.parameters())
 
 
-def lr_factor(step: int, total: int, config: FinetuneConfig) -> float:
-    """Linear warm-up, then cosine decay to `final_lr_fraction`."""
-    if step < config.warmup_steps:
-        return (step + 1) / config.warmup_steps
-    progress = min(1.0, (step - config.warmup_steps) / max(1, total - config.warmup_steps))
-    cosine = 0.5 * (1 + math.cos(math.pi * progress))
-    return config.final_lr_fraction + (1 - config.final_lr_fraction) * cosine
-
-
-def rng_state() -> dict[str, Any]:
-    return {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate(),
-            "cuda": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None}
-
-
-def restore_rng(state: dict[str, Any]) -> None:
-    torch.set_rng_state(state["torch"])
-    np.random.set_state(state["numpy"])
-    random.setstate(state["python"])
-    if state.get("cuda") is not None and torch.cuda.is_available():
-        torch.cuda.set_rng_state_all(state["cuda"])
-
-
 class Finetuner:
     """Fine-tunes `initial` (a person-only YoloxNano of `model_config`, either view) into `out/`."""
 
@@ -163,7 +142,8 @@ class Finetuner:
         self.steps_per_epoch = max(1, math.ceil(len(train_frames) / config.batch_size))
         total = self.steps_per_epoch * config.epochs
         self.scheduler = torch.optim.lr_scheduler.LambdaLR(
-            self.optimizer, lambda step: lr_factor(step, total, config))
+            self.optimizer,
+            lambda step: warmup_cosine(step, total, config.warmup_steps, config.final_lr_fraction))
         self.epoch = 0  # epochs completed
         self.batch = 0  # batches of the current epoch completed
         self.step = 0
