@@ -31,6 +31,7 @@ from detector.checkpoint import Checkpoint, CheckpointError, load_checkpoint
 from detector.graph import contract_info, contract_module
 from exporter.parity import ParityReport, check_parity, synthetic_parity_frames
 from exporter.quantize import check_integer_convolutions, quantize_int8
+from fisheye import FisheyeCamera
 
 DEFAULT_OPSET = 18
 PAD_VALUE = 0
@@ -83,25 +84,37 @@ def _write_metadata(path: Path, metadata: dict[str, str]) -> None:
     onnx.save(proto, str(path))
 
 
-def load_calibration_frames(folder: str | Path, input_size: int, limit: int = 64
-                            ) -> NDArray[np.uint8]:
-    """(N, S, S, 3) letterboxed RGB frames from the images of a folder (sorted by name)."""
+def load_calibration_frames(folder: str | Path, info: ModelInfo, limit: int = 64) -> NDArray[np.uint8]:
+    """(N, H, W, 3) model inputs made from the frames of a folder as the service makes them (the
+    model's view: letterbox or polar unwrap). A `fishloc synth` folder's frames use their own
+    cameras (its annotations.json); other images the assumed camera of DESIGN.md."""
     import cv2
 
-    from fisheye import Letterbox
+    from contract import prepare_input, reduce_like_decode
+    from contract.views import min_decoded_side
+    from detector.data.dataset import load_rgb
+    from detector.data.readers import read_dataset
+    from fisheye import assumed_camera
 
-    files = sorted(p for p in Path(folder).iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES)[:limit]
-    if not files:
+    root = Path(folder)
+    pairs: list[tuple[NDArray[np.uint8], FisheyeCamera]] = []
+    if (root / "annotations.json").is_file():
+        for frame in read_dataset(root)[:limit]:
+            camera = frame.camera or assumed_camera(frame.width, frame.height)
+            pairs.append((load_rgb(frame), camera))
+    else:
+        files = sorted(p for p in root.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES)[:limit]
+        for file in files:
+            bgr = cv2.imread(str(file), cv2.IMREAD_COLOR)
+            if bgr is None:
+                raise ValueError(f"cannot decode calibration image {file}")
+            rgb = np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), dtype=np.uint8)
+            pairs.append((rgb, assumed_camera(rgb.shape[1], rgb.shape[0])))
+    if not pairs:
         raise ValueError(f"no images (.jpg, .png, .bmp) in calibration folder {folder}")
-    frames = []
-    for file in files:
-        bgr = cv2.imread(str(file), cv2.IMREAD_COLOR)
-        if bgr is None:
-            raise ValueError(f"cannot decode calibration image {file}")
-        rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
-        letterbox = Letterbox.fit((rgb.shape[1], rgb.shape[0]), input_size)
-        frames.append(letterbox.apply(np.asarray(rgb, dtype=np.uint8), PAD_VALUE))
-    return np.stack(frames)
+    inputs = [prepare_input(info, reduce_like_decode(rgb, min_decoded_side(info, camera)), camera)[0]
+              for rgb, camera in pairs]
+    return np.stack(inputs)
 
 
 def export_onnx(checkpoint: Checkpoint, output: str | Path, input_size: int | None = None,
@@ -168,9 +181,11 @@ def run(args: argparse.Namespace) -> int:
     if args.min_score is not None:
         info.default_min_score = args.min_score
     try:
-        size = args.input_size or checkpoint.config.input_size
-        calibration = load_calibration_frames(args.calibration_data, size) if args.int8 else None
         checkpoint.build(args.checkpoint)  # a mismatched checkpoint fails here, with its own message
+        calibration = None
+        if args.int8:
+            model_info = contract_model(checkpoint, args.input_size, args.checkpoint)[1]
+            calibration = load_calibration_frames(args.calibration_data, model_info)
         report = export_onnx(checkpoint, args.output, args.input_size, args.opset, args.int8, calibration)
     except (CheckpointError, ValueError) as error:
         print(f"fishloc export: {error}", file=sys.stderr)

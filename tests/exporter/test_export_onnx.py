@@ -141,3 +141,24 @@ def test_cli_reports_corrupt_and_mismatched_checkpoints(tmp_path: Path,
     with pytest.raises(CheckpointError, match="does not exist"):
         load_checkpoint(tmp_path / "missing.pt")
     assert not (tmp_path / "x.onnx").exists() and not (tmp_path / "y.onnx").exists()
+
+
+def test_calibration_frames_are_the_models_own_inputs(tmp_path: Path) -> None:
+    import shutil
+
+    from contract import ModelInfo, PolarSpec
+    from exporter.export import load_calibration_frames
+
+    samples = Path(__file__).resolve().parents[2] / "samples"
+    polar = ModelInfo(name="p", version="1", view="polar", input_size=64, pad_value=0, default_min_score=0.3,
+                      trained_on="x", box_format="xyxy_polar", polar=PolarSpec(256, 32, 90.0))
+    strips = load_calibration_frames(samples, polar)  # a synth folder: each frame with its camera
+    assert strips.shape == (3, 64, 288, 3) and strips.dtype == np.uint8 and strips.std() > 5
+    plain = tmp_path / "plain"
+    plain.mkdir()
+    shutil.copy(samples / "000001.jpg", plain / "a.jpg")  # no annotations: the assumed camera
+    fisheye = ModelInfo(name="f", version="1", view="fisheye", input_size=64, pad_value=0,
+                        default_min_score=0.3, trained_on="x", box_format="cxcywh_radius_aligned")
+    assert load_calibration_frames(plain, fisheye).shape == (1, 64, 64, 3)
+    with pytest.raises(ValueError, match="no images"):
+        load_calibration_frames(tmp_path, fisheye)
