@@ -68,6 +68,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="strip rows, columns per turn and overlap columns (default 416 1664 128)")
     polar.add_argument("--freeze", nargs="*", default=None, choices=STAGES,
                        help="network stages kept frozen (default: stem dark2 dark3; none: no stage)")
+    polar.add_argument("--inner-head", type=float, default=0.0, metavar="FRACTION",
+                       help="design (c): a second head for the disc within FRACTION of the strip's "
+                            "radius (e.g. 0.3); train it alone with --freeze stem dark2 dark3 dark4 dark5 "
+                            "neck head")
     polar.add_argument("--zoom", type=float, nargs="+", default=[1.0], metavar="SCALE",
                        help="strip radii (multiples of the served one) drawn per sample, e.g. 0.8 1 1.25 "
                             "(each scale caches its own strips: memory grows with the count)")
@@ -126,15 +130,17 @@ def run(args: argparse.Namespace) -> int:
 def yolox_view(args: argparse.Namespace) -> tuple[YoloxDetectorConfig, StripAugment | FrameAugment]:
     """The network config and augmentation of `--view`; ValueError for flags of the other view."""
     if args.view == "fisheye":
-        if args.strip is not None or args.zoom != [1.0]:
-            raise ValueError("--strip and --zoom are options of the polar view, not of --view fisheye")
+        if args.strip is not None or args.zoom != [1.0] or args.inner_head:
+            raise ValueError("--strip, --zoom and --inner-head are options of the polar view, "
+                             "not of --view fisheye")
         size = {} if args.input_size is None else {"input_size": args.input_size}
         rotation = True if args.rotation_aug is None else args.rotation_aug
         flip = 0.0 if args.no_flip else FrameAugment().flip
         return FisheyeDetectorConfig(**size), FrameAugment(rotation=rotation, flip=flip)
     strip = {} if args.strip is None else dict(zip(("input_size", "polar_width", "polar_overlap"),
                                                    args.strip, strict=True))
-    return PolarDetectorConfig(**strip), StripAugment(radius_scales=tuple(args.zoom))
+    return (PolarDetectorConfig(**strip, inner_fraction=args.inner_head),
+            StripAugment(radius_scales=tuple(args.zoom)))
 
 
 def run_polar(args: argparse.Namespace) -> int:

@@ -28,7 +28,14 @@ import numpy as np
 import torch
 from torch import nn
 
-from detector.checkpoint import Checkpoint, CheckpointError, ModelInfo, load_checkpoint, save_checkpoint
+from detector.checkpoint import (
+    Checkpoint,
+    CheckpointError,
+    ModelInfo,
+    build_network,
+    load_checkpoint,
+    save_checkpoint,
+)
 from detector.data.readers import FrameAnnotations
 from detector.evaluate import eval_frames, json_safe, summarise, torch_predictor
 from detector.graph import contract_info, contract_module
@@ -48,7 +55,7 @@ LAST = "last.pt"
 BEST = "best.pt"
 TRAINER_KINDS = {POLAR_ARCH: "polar-finetune", FISHEYE_ARCH: "fisheye-finetune"}
 VIEWS = {POLAR_ARCH: "polar", FISHEYE_ARCH: "fisheye"}  # `fishloc train --view`
-STAGES = ("stem", "dark2", "dark3", "dark4", "dark5", "neck", "head")
+STAGES = ("stem", "dark2", "dark3", "dark4", "dark5", "neck", "head", "inner_head")
 
 
 @dataclass(frozen=True)
@@ -123,11 +130,15 @@ class Finetuner:
         torch.manual_seed(config.seed)
         np.random.seed(config.seed)
         random.seed(config.seed)
-        self.model = YoloxNano(model_config.yolox)
+        model = build_network(model_config)  # a YoloxNano, with an inner head where the config asks
+        if not isinstance(model, YoloxNano):
+            raise TypeError(f"{model_config.arch} builds a {type(model).__name__}, not a YOLOX network")
+        self.model = model
         self.model.load_state_dict(initial.state_dict(), strict=True)
         self.model.to(self.device)
         self.teacher = copy.deepcopy(self.model).eval().requires_grad_(False)
-        frozen = {id(p) for stage in config.freeze for p in stage_parameters(self.model, stage)}
+        frozen = {id(p) for stage in config.freeze if stage != "inner_head" or hasattr(self.model, stage)
+                  for p in stage_parameters(self.model, stage)}
         for parameter in self.model.parameters():
             parameter.requires_grad_(id(parameter) not in frozen)
         trainable = [p for p in self.model.parameters() if p.requires_grad]

@@ -40,6 +40,9 @@ class PolarDetectorConfig:
     max_detections: int = 300
     model_name: str = "fishloc-yolox-nano-polar"
     arch: str = ARCH
+    # Design (c): > 0 gives the network a second head for the cells of the bottom rows, the disc
+    # within this fraction of the strip's radius (detector.yolox.inner_head); 0: one head.
+    inner_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         if self.input_size % 32 or (self.polar_width + self.polar_overlap) % 32:
@@ -48,6 +51,8 @@ class PolarDetectorConfig:
         if self.arch != ARCH:
             raise ValueError(f"arch {self.arch!r} is not {ARCH!r}")
         PolarSpec(self.polar_width, self.polar_overlap, self.polar_max_theta_deg)  # checks the strip
+        if not 0.0 <= self.inner_fraction < 1.0:
+            raise ValueError(f"inner_fraction must lie in [0, 1), got {self.inner_fraction}")
 
     @property
     def yolox(self) -> YoloxConfig:
@@ -74,6 +79,10 @@ class PolarDetectorConfig:
 
 
 def build_polar_network(config: PolarDetectorConfig) -> YoloxNano:
+    if config.inner_fraction > 0:
+        from detector.yolox.inner_head import InnerHeadYolox
+
+        return InnerHeadYolox(config.yolox, config.inner_fraction)
     return YoloxNano(config.yolox)
 
 
@@ -121,4 +130,9 @@ def init_from_pretrained(path: str, config: YoloxSize) -> YoloxNano:
         raise ValueError(f"{path}: the pretrained network is YOLOX depth {coco.config.depth}, width "
                          f"{coco.config.width}; the config asks for {config.depth}, {config.width} with "
                          f"{config.num_classes} classes (a person detector has 1)")
-    return keep_classes(coco, [PERSON])
+    person = keep_classes(coco, [PERSON])
+    if isinstance(config, PolarDetectorConfig) and config.inner_fraction > 0:
+        from detector.yolox.inner_head import InnerHeadYolox
+
+        return InnerHeadYolox.from_network(person, config.inner_fraction)
+    return person
