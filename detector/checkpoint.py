@@ -8,6 +8,7 @@ that is not a checkpoint, a truncated file, weights that do not fit the stored c
 from __future__ import annotations
 
 import os
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -128,22 +129,39 @@ def load_model(path: str | Path) -> tuple[nn.Module, Checkpoint]:
     return checkpoint.build(path), checkpoint
 
 
-def save_release(source: str | Path, target: str | Path) -> Checkpoint:
+def save_release(source: str | Path, target: str | Path, info: ModelInfo | None = None) -> Checkpoint:
     """Copy a training checkpoint without its training state (optimizer, schedule, RNG): the file
-    to ship and to fine-tune from with `fishloc train --init`, a third of the size."""
+    to ship and to fine-tune from with `fishloc train --init`, a third of the size. `info`, when
+    given, replaces what the model says about itself (version, data, threshold)."""
     checkpoint = load_checkpoint(source)
-    release = Checkpoint(checkpoint.config, checkpoint.model_state, checkpoint.info, {})
+    release = Checkpoint(checkpoint.config, checkpoint.model_state, info or checkpoint.info, {})
     save_checkpoint(target, release)
     return release
 
 
-if __name__ == "__main__":
-    import sys
+def main(argv: list[str] | None = None) -> int:
+    import argparse
 
-    if len(sys.argv) != 3:
-        sys.exit("usage: python -m detector.checkpoint TRAINING_CHECKPOINT RELEASE_CHECKPOINT")
+    parser = argparse.ArgumentParser(description="a release copy of a training checkpoint")
+    parser.add_argument("source", help="training checkpoint (e.g. runs/NAME/last.pt)")
+    parser.add_argument("target", help="release checkpoint to write")
+    parser.add_argument("--model-version", default=None)
+    parser.add_argument("--trained-on", default=None)
+    parser.add_argument("--min-score", type=float, default=None, help="the default score threshold")
+    args = parser.parse_args(argv)
     try:
-        shipped = save_release(sys.argv[1], sys.argv[2])
+        info = load_checkpoint(args.source).info
+        info = ModelInfo(model_version=args.model_version or info.model_version,
+                         trained_on=args.trained_on or info.trained_on,
+                         default_min_score=info.default_min_score if args.min_score is None
+                         else args.min_score)
+        shipped = save_release(args.source, args.target, info)
     except CheckpointError as error:
-        sys.exit(f"detector.checkpoint: {error}")
-    print(f"wrote {sys.argv[2]}: {shipped.info.model_version}, trained on {shipped.info.trained_on}")
+        print(f"detector.checkpoint: {error}", file=sys.stderr)
+        return 2
+    print(f"wrote {args.target}: {shipped.info.model_version}, trained on {shipped.info.trained_on}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
