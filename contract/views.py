@@ -17,7 +17,7 @@ import dataclasses
 import functools
 import math
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 import cv2
 import numpy as np
@@ -131,9 +131,12 @@ def min_decoded_side(info: ModelInfo, camera: FisheyeCamera) -> int:
 
 
 @functools.lru_cache(maxsize=32)
-def _cached_maps(grid: PolarGrid, scale_xy: tuple[float, float]
-                 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-    return grid.sampling_maps(scale_xy)
+def _cached_maps(grid: PolarGrid, scale_xy: tuple[float, float]) -> tuple[NDArray[Any], NDArray[Any]]:
+    """`grid`'s sampling maps in OpenCV's fixed-point form (4.5 MB for a 416 × 1792 strip, a quarter
+    less than float maps, and the same samples): one entry per camera geometry and frame size."""
+    map_u, map_v = grid.sampling_maps(scale_xy)
+    fixed_uv, fraction = cv2.convertMaps(map_u, map_v, cv2.CV_16SC2)
+    return np.asarray(fixed_uv), np.asarray(fraction)
 
 
 def prepare_input(info: ModelInfo, rgb: NDArray[np.uint8], camera: FisheyeCamera

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -178,9 +179,10 @@ class PolarGrid:
         return np.stack([x1, self.radius_to_row(outer), x2, self.radius_to_row(inner)], axis=1)
 
 
-def unwrap_with_maps(image: NDArray[np.uint8], map_u: NDArray[np.float32], map_v: NDArray[np.float32],
+def unwrap_with_maps(image: NDArray[np.uint8], map_u: NDArray[Any], map_v: NDArray[Any],
                      border_value: int = 0) -> NDArray[np.uint8]:
-    """Sample `image` at precomputed `sampling_maps` (bilinear; outside the image: `border_value`)."""
+    """Sample `image` at precomputed `sampling_maps` (bilinear; outside the image: `border_value`),
+    float or as `cv2.convertMaps` makes them fixed-point."""
     import cv2
 
     channels = 1 if image.ndim == 2 else image.shape[2]
