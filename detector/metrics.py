@@ -9,7 +9,8 @@
 - PE: Euclidean floor error (m) of detections matched at IoU 0.5 to people with known positions,
   placed by their foot point (`mPE`, `PE_near/mid/far` by GT distance) or by their box centre
   (`mPE_center`, ...).
-- precision / recall at one score threshold, matched at IoU 0.5.
+- precision / recall at one score threshold, matched at IoU 0.5; `recall_nadir` the recall of the
+  people below the lens (box centre within 0.2 of the image circle's radius), seen from above.
 
 Crowd boxes (people marked `iscrowd`, too hidden to count) are ignore regions: a detection that
 matches no person but overlaps a crowd box at the IoU threshold counts neither way.
@@ -40,6 +41,7 @@ DISTANCE_BINS_M: dict[str, tuple[float, float]] = {
     "near": (0.0, 10.0), "mid": (10.0, 20.0), "far": (20.0, math.inf)}
 RECALL_POINTS = np.linspace(0.0, 1.0, 101)
 MAX_DETECTIONS = 100
+NADIR_FRACTION = 0.2  # of the image circle's radius: people there are seen from above
 RADIUS_ALIGNED = "_radius_aligned"  # key suffix of the radius-aligned scoring of file-box frames
 
 
@@ -227,6 +229,25 @@ def precision_recall_at(frames: Sequence[EvalFrame], prepared: Sequence[FrameMat
     return precision, recall
 
 
+def nadir_recall(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch], min_score: float) -> float:
+    """Recall at `min_score` (IoU 0.5) of the people below the lens: box centre within
+    NADIR_FRACTION of the image circle's radius, seen from above (frames of calibrated cameras;
+    NaN when there are none)."""
+    found = total = 0
+    for frame, match in zip(frames, prepared, strict=True):
+        if frame.camera is None or frame.camera_assumed or len(frame.gt_boxes) == 0:
+            continue
+        offset = frame.gt_boxes[:, :2] - np.asarray(frame.camera.principal_point)
+        below = np.hypot(offset[:, 0], offset[:, 1]) < NADIR_FRACTION * frame.camera.image_circle_radius_px()
+        matched = greedy_match(match.iou, 0.5)
+        above = frame.det_scores[match.order] >= min_score
+        hit = np.zeros(len(frame.gt_boxes), dtype=bool)
+        hit[matched[above & (matched >= 0)]] = True
+        found += int((hit & below).sum())
+        total += int(below.sum())
+    return found / total if total else float("nan")
+
+
 def pr_curve(frames: Sequence[EvalFrame]) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Precision, recall and score thresholds (each (D,)) at IoU 0.5 over all detections."""
     scores, positives, num_gt = [], [], 0
@@ -261,6 +282,7 @@ def compute_metrics(frames: Sequence[EvalFrame], min_score: float) -> dict[str, 
             result[f"PE_{name}{suffix}"] = _mean(errors[(distances >= low) & (distances < high)])
         result[f"PE_matches{suffix}"] = float(len(errors))
     result["precision"], result["recall"] = precision_recall_at(frames, prepared, min_score)
+    result["recall_nadir"] = nadir_recall(frames, prepared, min_score)
     result["num_frames"] = float(len(frames))
     result["num_gt"] = float(sum(len(f.gt_boxes) for f in frames))
     if any(frame.gt_corners is not None for frame in frames):

@@ -175,3 +175,15 @@ def test_an_assumed_camera_gives_no_floor_errors_or_distances() -> None:
     # A CEPDOF-like frame: no positions, no distances -> distance-binned AP and PE undefined.
     cepdof = compute_metrics([_file_frame([SITTING], [HUGS_SITTING], [0.9])], 0.5)
     assert all(math.isnan(cepdof[k]) for k in ("AP_near", "AP_mid", "AP_far", "mPE", "PE_near"))
+
+
+def test_recall_of_the_people_below_the_lens() -> None:
+    # The image circle (θ ≤ 90°) is 157 px in radius: within 0.2 of it is 31 px from the centre.
+    below = [199.5, 214.5, 30.0, 30.0]  # 15 px out: seen from above
+    out = [199.5, 119.5, 16.0, 40.0]  # 80 px out
+    frames = [_frame([below, out], [[0.0, -0.4], [0.0, 2.0]], [out, below], [0.9, 0.2]),
+              _frame([below], [[0.0, -0.4]], [below], [0.8])]
+    metrics = compute_metrics(frames, min_score=0.5)
+    assert metrics["recall_nadir"] == pytest.approx(0.5)  # the 0.2 detection is under the threshold
+    assert compute_metrics(frames, min_score=0.1)["recall_nadir"] == pytest.approx(1.0)
+    assert math.isnan(compute_metrics([_frame([out], [[0.0, 2.0]], [out], [0.9])], 0.5)["recall_nadir"])
