@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import torch
-from torch import Tensor
+from torch import Tensor, nn
 
 from detector.yolox.head import CLASSES_START, OBJECTNESS
 from detector.yolox.network import STRIDES
@@ -56,3 +56,16 @@ def decode(maps: Sequence[Tensor], strides: Sequence[int] = STRIDES) -> Tensor:
 def class_scores(decoded: Tensor) -> Tensor:
     """(B, A, 5 + C) decoded (or ONNX-layout) rows -> (B, A, C) objectness x class probability."""
     return decoded[..., OBJECTNESS:CLASSES_START] * decoded[..., CLASSES_START:]
+
+
+def top_people(net: nn.Module, image: Tensor, max_detections: int) -> tuple[Tensor, Tensor]:
+    """(N, H, W, 3) uint8 RGB images -> the `max_detections` cells of highest objectness x
+    p(person): boxes (N, K, 4) `cxcywh` in YOLOX's edge coordinates (pixel i spans [i, i + 1)) and
+    scores (N, K) descending. What both views' ONNX graphs compute before their own box layout."""
+    bgr = image.permute(0, 3, 1, 2).flip(1).float()  # (N, 3, H, W) BGR 0-255, as YOLOX was trained
+    decoded = decode(net(bgr))  # (N, A, 5 + C): cxcywh px, objectness, classes
+    scores = class_scores(decoded)[..., 0]  # (N, A) person
+    k = min(max_detections, scores.shape[1])
+    top_scores, top = torch.topk(scores, k, dim=1)  # (N, K)
+    cxcywh = torch.gather(decoded[..., :4], 1, top[..., None].expand(-1, -1, 4))  # (N, K, 4)
+    return cxcywh, top_scores

@@ -14,7 +14,7 @@ import torch
 from torch import Tensor, nn
 
 from contract import BOX_FORMATS, VIEW_POLAR, ModelInfo, PolarSpec
-from detector.yolox.decode import class_scores, decode
+from detector.yolox.decode import top_people
 from detector.yolox.network import YoloxConfig, YoloxNano
 
 ARCH = "yolox-polar"
@@ -96,14 +96,9 @@ class PolarContract(nn.Module):
         self.max_detections = max_detections
 
     def forward(self, image: Tensor) -> tuple[Tensor, Tensor]:
-        bgr = image.permute(0, 3, 1, 2).flip(1).float()  # (N, 3, H, W) BGR 0-255, as YOLOX was trained
-        decoded = decode(self.net(bgr))  # (N, A, 5 + C): cxcywh px, objectness, classes
-        scores = class_scores(decoded)[..., 0]  # (N, A) person
-        k = min(self.max_detections, scores.shape[1])
-        top_scores, top = torch.topk(scores, k, dim=1)  # (N, K)
-        cxcywh = torch.gather(decoded[..., :4], 1, top[..., None].expand(-1, -1, 4))  # (N, K, 4)
+        cxcywh, scores = top_people(self.net, image, self.max_detections)  # (N, K, 4), (N, K)
         centre, half = cxcywh[..., :2] - EDGE_TO_CENTRE_PX, cxcywh[..., 2:] / 2
-        return torch.cat([centre - half, centre + half], dim=-1), top_scores
+        return torch.cat([centre - half, centre + half], dim=-1), scores
 
 
 class YoloxSize(Protocol):
