@@ -1,0 +1,32 @@
+"""`python -m benchmarks.compare` on the shipped samples: every row evaluated and timed, one table."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from benchmarks.compare import main
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_compare_table_and_json(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "compare.json"
+    assert main(["--model", f"shipped={ROOT / 'models' / 'fishloc-default.onnx'}",
+                 "--baseline", f"letterbox=letterbox:{ROOT / 'models' / 'pretrained' / 'yolox_nano.onnx'}",
+                 "--data", f"samples={ROOT / 'samples' / 'annotations.json'}",
+                 "--frames", str(ROOT / "samples"), "--runs", "2", "--warmup", "0",
+                 "--json", str(out)]) == 0
+    table = capsys.readouterr().out
+    assert "| shipped |" in table and "| letterbox |" in table and "samples AP50" in table
+    record = json.loads(out.read_text())
+    shipped = record["rows"]["shipped"]
+    # The shipped model finds the samples' people (model card: AP50 0.74); the zero-shot letterbox
+    # view of the same COCO weights barely does.
+    assert shipped["metrics"]["samples"]["AP50"] > 0.5
+    assert record["rows"]["letterbox"]["metrics"]["samples"]["AP50"] < shipped["metrics"]["samples"]["AP50"]
+    times = shipped["times"]
+    assert all(times[k] > 0 for k in ("inference_p50_ms", "e2e_p50_ms", "e2e_p95_ms"))  # measured, not judged
+    assert record["rows"]["letterbox"]["times"]["inference_p50_ms"] is None
