@@ -13,22 +13,21 @@ becomes the ONNX graph of DESIGN.md's `fisheye` view: uint8 RGB letterboxed squa
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
-from typing import Any
+from dataclasses import dataclass
 
 import torch
 from torch import Tensor, nn
 
 from contract import BOX_FORMATS, VIEW_FISHEYE, ModelInfo
 from detector.yolox.decode import top_people
-from detector.yolox.network import YoloxConfig, YoloxNano
+from detector.yolox.network import DetectorConfigRecord, YoloxNano
 from detector.yolox.polar import EDGE_TO_CENTRE_PX, LICENCE, PAD_VALUE
 
 ARCH = "yolox-fisheye"
 
 
 @dataclass(frozen=True)
-class FisheyeDetectorConfig:
+class FisheyeDetectorConfig(DetectorConfigRecord):
     """A YOLOX network reading the frame letterboxed into an `input_size` square."""
 
     input_size: int = 640
@@ -46,18 +45,6 @@ class FisheyeDetectorConfig:
             raise ValueError(f"arch {self.arch!r} is not {ARCH!r}")
         if self.max_detections < 1:
             raise ValueError(f"max_detections must be at least 1, got {self.max_detections}")
-
-    @property
-    def yolox(self) -> YoloxConfig:
-        return YoloxConfig(num_classes=self.num_classes, depth=self.depth, width=self.width)
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, record: dict[str, Any]) -> FisheyeDetectorConfig:
-        names = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in record.items() if k in names})
 
     def model_info(self, version: str, trained_on: str, default_min_score: float) -> ModelInfo:
         """The contract metadata of this network's export."""

@@ -10,7 +10,8 @@ boxes in pixels.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
+from typing import Any, Self
 
 import torch
 from torch import Tensor, nn
@@ -102,3 +103,24 @@ def keep_classes(model: YoloxNano, classes: Sequence[int]) -> YoloxNano:
     subset.load_state_dict(state, strict=True)
     device = next(model.parameters()).device
     return subset.to(device).train(model.training)
+
+
+class DetectorConfigRecord:
+    """What the detector configs of both views share (they are frozen dataclasses that mix this in):
+    the YOLOX size they build and the dict a checkpoint stores."""
+
+    num_classes: int
+    depth: float
+    width: float
+
+    @property
+    def yolox(self) -> YoloxConfig:
+        return YoloxConfig(num_classes=self.num_classes, depth=self.depth, width=self.width)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}  # type: ignore[arg-type]
+
+    @classmethod
+    def from_dict(cls, record: dict[str, Any]) -> Self:
+        names = {f.name for f in fields(cls)}  # type: ignore[arg-type]
+        return cls(**{k: v for k, v in record.items() if k in names})

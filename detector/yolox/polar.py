@@ -7,15 +7,15 @@ strips in, the top `max_detections` person boxes (`xyxy` strip px) and scores ou
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
-from typing import Any, Protocol
+from dataclasses import dataclass
+from typing import Protocol
 
 import torch
 from torch import Tensor, nn
 
 from contract import BOX_FORMATS, VIEW_POLAR, ModelInfo, PolarSpec
 from detector.yolox.decode import top_people
-from detector.yolox.network import YoloxConfig, YoloxNano
+from detector.yolox.network import DetectorConfigRecord, YoloxNano
 
 ARCH = "yolox-polar"
 LICENCE = "Apache-2.0 (weights from or fine-tuned from YOLOX-Nano, Copyright (c) Megvii Inc.)"
@@ -26,7 +26,7 @@ EDGE_TO_CENTRE_PX = 0.5
 
 
 @dataclass(frozen=True)
-class PolarDetectorConfig:
+class PolarDetectorConfig(DetectorConfigRecord):
     """A YOLOX network reading a polar strip of `input_size` rows and `polar_width` columns per
     turn plus `polar_overlap` repeated ones, whose top row is the ring θ = `polar_max_theta_deg`."""
 
@@ -55,20 +55,8 @@ class PolarDetectorConfig:
             raise ValueError(f"inner_fraction must lie in [0, 1), got {self.inner_fraction}")
 
     @property
-    def yolox(self) -> YoloxConfig:
-        return YoloxConfig(num_classes=self.num_classes, depth=self.depth, width=self.width)
-
-    @property
     def strip_wh(self) -> tuple[int, int]:
         return self.polar_width + self.polar_overlap, self.input_size
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, record: dict[str, Any]) -> PolarDetectorConfig:
-        names = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in record.items() if k in names})
 
     def model_info(self, version: str, trained_on: str, default_min_score: float) -> ModelInfo:
         """The contract metadata of this network's export."""
