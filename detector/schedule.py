@@ -20,6 +20,13 @@ def warmup_cosine(step: int, total: int, warmup_steps: int, final_fraction: floa
     return final_fraction + (1 - final_fraction) * cosine
 
 
+def seed_everything(seed: int) -> None:
+    """Seed the global torch, numpy and Python RNGs (a training run's start)."""
+    torch.manual_seed(seed)
+    np.random.seed(seed)
+    random.seed(seed)
+
+
 def rng_state(generators: Mapping[str, torch.Generator] | None = None) -> dict[str, Any]:
     """The global torch, numpy, Python (and CUDA) RNG states, plus those of named `generators`."""
     state: dict[str, Any] = {

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-import random
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -29,7 +28,7 @@ from detector.losses import DetectionLoss, LossConfig
 from detector.metrics import pr_curve
 from detector.model import DetectorConfig, FishLocNet, build_model
 from detector.plots import plot_training
-from detector.schedule import restore_rng, rng_state, warmup_cosine
+from detector.schedule import restore_rng, rng_state, seed_everything, warmup_cosine
 
 LOG_FILE = "log.jsonl"
 LAST = "last.pt"
@@ -77,9 +76,7 @@ class Trainer:
         self.out = out
         self.progress = progress
         self.device = resolve_device(config.device)
-        torch.manual_seed(config.seed)
-        np.random.seed(config.seed)
-        random.seed(config.seed)
+        seed_everything(config.seed)
         self.model: FishLocNet = build_model(model_config)
         if init is not None:
             source = load_checkpoint(init)

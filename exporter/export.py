@@ -34,7 +34,6 @@ from exporter.quantize import check_integer_convolutions, quantize_int8
 from fisheye import FisheyeCamera
 
 DEFAULT_OPSET = 18
-PAD_VALUE = 0
 _IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp"}
 
 

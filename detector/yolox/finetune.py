@@ -18,13 +18,11 @@ from __future__ import annotations
 import copy
 import json
 import math
-import random
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
-import numpy as np
 import torch
 from torch import nn
 
@@ -39,7 +37,7 @@ from detector.checkpoint import (
 from detector.data.readers import FrameAnnotations
 from detector.evaluate import eval_frames, json_safe, summarise, torch_predictor
 from detector.graph import contract_info, contract_module
-from detector.schedule import restore_rng, rng_state, warmup_cosine
+from detector.schedule import restore_rng, rng_state, seed_everything, warmup_cosine
 from detector.trainer import best_f1_threshold, resolve_device
 from detector.yolox.fisheye import ARCH as FISHEYE_ARCH
 from detector.yolox.fisheye import FisheyeDetectorConfig
@@ -127,9 +125,7 @@ class Finetuner:
         self.out = out
         self.progress = progress
         self.device = resolve_device(config.device)
-        torch.manual_seed(config.seed)
-        np.random.seed(config.seed)
-        random.seed(config.seed)
+        seed_everything(config.seed)
         model = build_network(model_config)  # a YoloxNano, with an inner head where the config asks
         if not isinstance(model, YoloxNano):
             raise TypeError(f"{model_config.arch} builds a {type(model).__name__}, not a YOLOX network")
