@@ -62,7 +62,8 @@ def _clothes(rng: np.random.Generator) -> dict[str, Material | bool | str]:
     }
 
 
-def _person(rng: np.random.Generator, x: float, y: float, heading: float, pose: str) -> PersonSpec:
+def sample_person(rng: np.random.Generator, x: float, y: float, heading: float, pose: str) -> PersonSpec:
+    """A person of random size, clothes and carried item at (x, y) facing `heading` in `pose`."""
     carried = "none"
     if pose != "sitting":
         carried = str(rng.choice(["none", "bag", "backpack", "box", "phone"],
@@ -112,7 +113,7 @@ def place_people(rng: np.random.Generator, scene: Scene, count: int
         if pose == "sitting" and free_seats:
             seat = seats[int(free_seats.pop())]
             if all(np.hypot(px - seat.x, py - seat.y) >= 0.45 for px, py in taken):
-                spec = _person(rng, seat.x, seat.y, seat.yaw_rad, "sitting")
+                spec = sample_person(rng, seat.x, seat.y, seat.yaw_rad, "sitting")
                 people.append(replace(spec, seat_height_m=seat.height_m))
                 taken.append((seat.x, seat.y))
                 continue
@@ -135,7 +136,7 @@ def place_people(rng: np.random.Generator, scene: Scene, count: int
         else:
             continue
         heading = float(rng.uniform(0, 2 * np.pi))
-        spec = _person(rng, float(x), float(y), heading, pose)
+        spec = sample_person(rng, float(x), float(y), heading, pose)
         if pose == "sitting":
             seat_h = seat_height_for(spec)
             chair_at = np.array([x, y]) + 0.07 * np.array([np.cos(heading), np.sin(heading)])

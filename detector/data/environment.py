@@ -1,6 +1,7 @@
 """The static surroundings of a scene: floor, walls (room walls or building façades), ceiling, sky.
 
-The enclosure is an axis-aligned rectangle around the camera's nadir; a ray leaves it through a wall
+The enclosure is an axis-aligned rectangle around the camera's nadir (of a posed grid: around
+any point of the world the camera sees); a ray leaves it through a wall
 unless it meets the floor first. `trace_environment` gives every pixel its distance, albedo and
 normal; a scene computes it once and reuses it for all its frames.
 """
@@ -70,11 +71,14 @@ def trace_environment(env: Environment, grid: RayGrid) -> Background:
     d = grid.directions.reshape(-1, 3)[valid].astype(np.float64)
     pix_angle = grid.pixel_angle_rad.ravel()[valid].astype(np.float64)
     n = len(d)
+    ox, oy = grid.nadir_m
     x0, y0, x1, y1 = env.room_m
     with np.errstate(divide="ignore", invalid="ignore"):
         t_floor = np.where(d[:, 2] < -1e-9, altitude / -d[:, 2], np.inf)
-        tx = np.where(d[:, 0] > 1e-12, x1 / d[:, 0], np.where(d[:, 0] < -1e-12, x0 / d[:, 0], np.inf))
-        ty = np.where(d[:, 1] > 1e-12, y1 / d[:, 1], np.where(d[:, 1] < -1e-12, y0 / d[:, 1], np.inf))
+        tx = np.where(d[:, 0] > 1e-12, (x1 - ox) / d[:, 0],
+                      np.where(d[:, 0] < -1e-12, (x0 - ox) / d[:, 0], np.inf))
+        ty = np.where(d[:, 1] > 1e-12, (y1 - oy) / d[:, 1],
+                      np.where(d[:, 1] < -1e-12, (y0 - oy) / d[:, 1], np.inf))
     t_wall = np.minimum(tx, ty)
     wall_axis = np.where(tx <= ty, 0, 1)
     z_wall = altitude + t_wall * d[:, 2]
@@ -99,7 +103,7 @@ def trace_environment(env: Environment, grid: RayGrid) -> Background:
     idx = np.flatnonzero(on_floor)
     if idx.size:
         tf = t[idx]
-        fx, fy = tf * d[idx, 0], tf * d[idx, 1]
+        fx, fy = ox + tf * d[idx, 0], oy + tf * d[idx, 1]
         # The floor seen at incidence θ stretches a pixel by 1 / cos θ radially.
         footprint = tf * pix_angle[idx] / np.maximum(-d[idx, 2], 0.02)
         over = env.floor_overlay.sample(fx, fy, footprint)
@@ -116,7 +120,7 @@ def trace_environment(env: Environment, grid: RayGrid) -> Background:
     idx = np.flatnonzero(on_wall)
     if idx.size:
         tw = t[idx]
-        wx, wy, wz = tw * d[idx, 0], tw * d[idx, 1], altitude + tw * d[idx, 2]
+        wx, wy, wz = ox + tw * d[idx, 0], oy + tw * d[idx, 1], altitude + tw * d[idx, 2]
         axis = wall_axis[idx]
         positive = np.where(axis == 0, d[idx, 0] > 0, d[idx, 1] > 0)
         s = _wall_coordinate(env, wx, wy, axis, positive)

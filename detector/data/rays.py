@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -24,15 +24,21 @@ _cache: OrderedDict[str, RayGrid] = OrderedDict()
 
 @dataclass(frozen=True)
 class RayGrid:
-    """Rays of every pixel of a frame: `directions` (H, W, 3) float32 unit vectors in the floor
+    """Rays of every pixel of a frame: `directions` (H, W, 3) float32 unit vectors in the world
     frame (zeros outside the calibrated field), `valid` (H, W) bool, `theta` (H, W) float32 rad,
-    `pixel_angle_rad` (H, W) float32: the angle one pixel spans (for texture filtering)."""
+    `pixel_angle_rad` (H, W) float32: the angle one pixel spans (for texture filtering).
+
+    The world frame is the camera's floor frame unless the grid is posed (`posed_grid`): then the
+    camera's nadir stands at `nadir_m` of the world and its floor frame is turned by `yaw_rad`
+    (counter-clockwise), so several cameras can look at one world."""
 
     camera: FisheyeCamera
     directions: NDArray[np.float32]
     valid: NDArray[np.bool_]
     theta: NDArray[np.float32]
     pixel_angle_rad: NDArray[np.float32]
+    nadir_m: tuple[float, float] = (0.0, 0.0)
+    yaw_rad: float = 0.0
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -40,7 +46,14 @@ class RayGrid:
 
     @property
     def origin(self) -> FloatArray:
-        return np.array([0.0, 0.0, self.camera.altitude_m])
+        return np.array([self.nadir_m[0], self.nadir_m[1], self.camera.altitude_m])
+
+    def world_to_camera(self, xyz_m: FloatArray) -> FloatArray:
+        """(..., 3) world points -> (..., 3) the same points in the camera's floor frame."""
+        c, s = np.cos(self.yaw_rad), np.sin(self.yaw_rad)
+        dx = xyz_m[..., 0] - self.nadir_m[0]
+        dy = xyz_m[..., 1] - self.nadir_m[1]
+        return np.stack([c * dx + s * dy, -s * dx + c * dy, xyz_m[..., 2]], axis=-1)
 
     def region_rays(self, rect: tuple[int, int, int, int]) -> FloatArray:
         """(K, 3) float64 rays of the pixels of `rect` = (x0, y0, x1, y1), row-major."""
@@ -78,6 +91,15 @@ def ray_grid(camera: FisheyeCamera) -> RayGrid:
     while len(_cache) > _CACHE_SIZE:
         _cache.popitem(last=False)
     return grid
+
+
+def posed_grid(grid: RayGrid, nadir_m: tuple[float, float], yaw_rad: float) -> RayGrid:
+    """`grid` with its camera's nadir at `nadir_m` (x, y) of the world and its floor frame turned
+    by `yaw_rad` counter-clockwise: the rays are rotated into the world frame."""
+    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+    rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]], dtype=np.float32)
+    return replace(grid, directions=np.ascontiguousarray(grid.directions @ rotation.T),
+                   nadir_m=(float(nadir_m[0]), float(nadir_m[1])), yaw_rad=float(yaw_rad))
 
 
 def project_points(camera: FisheyeCamera, xyz_m: FloatArray) -> FloatArray:

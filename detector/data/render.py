@@ -204,7 +204,7 @@ def _draw(grid: RayGrid, layer: Layer, groups: list[Group],
     cam = grid.camera
     origin = grid.origin
     for group, (a, b, radius) in zip(groups, bounds, strict=True):
-        rect = capsule_region(cam, a, b, radius)
+        rect = capsule_region(cam, grid.world_to_camera(a), grid.world_to_camera(b), radius)
         if rect is None:
             continue
         x0, y0, x1, y1 = rect
@@ -300,7 +300,7 @@ def _shadows(grid: RayGrid, t_buf: Image32, normal: Image32, groups: list[Group]
         middle = (a + b) / 2
         reach = radius + float(np.linalg.norm(b - a)) / 2
         floor_point = middle - (middle[2] / light_dir[2]) * light_dir
-        rect = capsule_region(cam, middle, floor_point, reach)
+        rect = capsule_region(cam, grid.world_to_camera(middle), grid.world_to_camera(floor_point), reach)
         if rect is None:
             continue
         x0, y0 = rect[0] // step, rect[1] // step

@@ -1,4 +1,5 @@
-"""`fishloc synth`: render a synthetic data set (JPEG frames + annotations.json).
+"""`fishloc synth`: render a synthetic data set (JPEG frames + annotations.json), or with
+`--sequence` a site's cameras capturing in step while people walk through it.
 
 Runs without torch (numpy and OpenCV only), in parallel worker processes; the output depends only
 on the seed, split and options, never on the number of workers.
@@ -15,6 +16,7 @@ from tqdm import tqdm
 
 from detector.data.contact_sheet import make_contact_sheet
 from detector.data.scenes import KINDS, STYLES
+from detector.data.sequence_cli import run_sequence
 from detector.data.synth import SynthConfig
 from detector.data.synth_writer import ANNOTATIONS_FILE, default_workers, write_dataset
 from fisheye import CalibrationError, load_camera
@@ -42,7 +44,7 @@ def _styles(text: str) -> str:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, type=Path, help="output folder (created)")
-    parser.add_argument("--images", required=True, type=int, help="number of frames")
+    parser.add_argument("--images", type=int, help="number of frames (not with --sequence)")
     parser.add_argument("--size", type=int, default=640, help=f"frame side in px (<= {MAX_SIZE})")
     parser.add_argument("--seed", type=int, default=0, help="random seed of the frames")
     parser.add_argument("--split", choices=("seen", "unseen"), default="seen",
@@ -56,6 +58,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--jpeg-quality", type=int, help="fixed JPEG quality (default: random 70-95)")
     parser.add_argument("--workers", type=int, default=default_workers(),
                         help="worker processes (default: all cores)")
+    sequence = parser.add_argument_group("sequences (--sequence)")
+    sequence.add_argument("--sequence", action="store_true",
+                          help="render a site's cameras in step: DIR/<camera_id>/*.jpg and tracks")
+    sequence.add_argument("--seconds", type=float, default=60.0, help="length of the sequence")
+    sequence.add_argument("--fps", type=float, default=5.0, help="steps per second")
+    sequence.add_argument("--site", type=Path,
+                          help="site file (room, doors, cameras with site_pose, zones, lines); "
+                               "default: a built-in hall with two cameras")
     parser.add_argument("--contact-sheet", type=Path, help="also write a PNG grid of the frames")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -63,6 +73,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     if not 16 <= args.size <= MAX_SIZE:
         print(f"fishloc synth: --size must be within [16, {MAX_SIZE}]", file=sys.stderr)
+        return 2
+    if args.sequence:
+        return run_sequence(args)
+    if args.images is None:
+        print("fishloc synth: --images is required (or --sequence)", file=sys.stderr)
         return 2
     if args.images < 1 or args.images_per_scene < 1:
         print("fishloc synth: --images and --images-per-scene must be positive", file=sys.stderr)

@@ -17,6 +17,7 @@ from typing import Any
 
 import cv2
 
+from detector.data.ground_truth import PersonTruth
 from detector.data.synth import SynthConfig, SynthFrame, render_frame
 from fisheye import camera_to_dict
 
@@ -39,21 +40,23 @@ def frame_records(frame: SynthFrame) -> tuple[dict[str, Any], list[dict[str, Any
         "split": frame.split,
         "camera": camera_to_dict(frame.camera),
     }
-    annotations = []
-    for person in frame.people:
-        annotations.append({
-            "id": 0,
-            "image_id": frame.index + 1,
-            "category_id": 1,
-            "rotated_box": [round(v, 3) for v in person.rotated_box],
-            "bbox": [round(v, 3) for v in person.bbox],
-            "location_m": [round(v, 5) for v in person.location_m],
-            "distance_m": round(person.distance_m, 5),
-            "visible_fraction": round(person.visible_fraction, 4),
-            "area": person.visible_px,
-            "iscrowd": int(person.ignore),
-        })
-    return image, annotations
+    return image, [person_record(person, frame.index + 1) for person in frame.people]
+
+
+def person_record(person: PersonTruth, image_id: int) -> dict[str, Any]:
+    """The `annotations` record of one person in a frame (its `id` filled in later)."""
+    return {
+        "id": 0,
+        "image_id": image_id,
+        "category_id": 1,
+        "rotated_box": [round(v, 3) for v in person.rotated_box],
+        "bbox": [round(v, 3) for v in person.bbox],
+        "location_m": [round(v, 5) for v in person.location_m],
+        "distance_m": round(person.distance_m, 5),
+        "visible_fraction": round(person.visible_fraction, 4),
+        "area": person.visible_px,
+        "iscrowd": int(person.ignore),
+    }
 
 
 def _work(index: int, seed: int, split: str, config: SynthConfig, out_dir: str
