@@ -167,6 +167,7 @@ def json_safe(value: Any) -> Any:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = "Site sequences: fishloc eval --tracks --help (tracks, zone counts, line counts)."
     parser.add_argument("--model", required=True, help="checkpoint (.pt) or ONNX model (.onnx)")
     parser.add_argument("--data", required=True, help="annotations.json (FishLoc/LOAF or CEPDOF format)")
     parser.add_argument("--json", required=True, help="where to write the metrics")

@@ -24,6 +24,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "eval": ("detector.evaluate", "evaluate a checkpoint or ONNX model: mAP, AP by distance, PE in metres"),
 }
 
+# A flag that sends a subcommand to another module: `fishloc eval --tracks` needs no torch.
+_VARIANTS: dict[tuple[str, str], str] = {("eval", "--tracks"): "service.track_eval_cli"}
+
 # Modules that only the training extra installs.
 _TRAIN_ONLY = ("torch", "onnx", "onnxscript", "matplotlib", "scipy")
 
@@ -50,6 +53,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     name, rest = arguments[0], arguments[1:]
     module_name, summary = COMMANDS[name]
+    module_name = next((m for (n, flag), m in _VARIANTS.items() if n == name and flag in rest), module_name)
     try:
         module = importlib.import_module(module_name)
     except ModuleNotFoundError as error:

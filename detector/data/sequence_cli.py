@@ -18,7 +18,8 @@ from fisheye import CalibrationError
 
 def run_sequence(args: argparse.Namespace) -> int:
     if args.images is not None:
-        print("fishloc synth: --images does not apply to --sequence (use --seconds and --fps)", file=sys.stderr)
+        print("fishloc synth: --images does not apply to --sequence (use --seconds and --fps)",
+              file=sys.stderr)
         return 2
     if not (args.seconds > 0 and args.fps > 0 and math.isfinite(args.seconds * args.fps)):
         print("fishloc synth: --seconds and --fps must be positive", file=sys.stderr)

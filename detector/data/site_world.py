@@ -90,7 +90,8 @@ class SitePlan:
             "id": self.site_id,
             "room_m": list(self.room_m),
             "doors": [{"wall": d.wall, "at_m": d.at_m, "width_m": d.width_m} for d in self.doors],
-            "zones": {name: {"polygon_m": [list(p) for p in polygon]} for name, polygon in self.zones.items()},
+            "zones": {name: {"polygon_m": [list(p) for p in polygon]}
+                      for name, polygon in self.zones.items()},
             "lines": {name: {"from_m": list(a), "to_m": list(b)} for name, (a, b) in self.lines.items()},
         }
 
@@ -142,7 +143,8 @@ def load_plan(path: str | Path) -> SitePlan:
     if not isinstance(document, dict):
         raise ValueError(f"{path}: a site file is a mapping")
     site_id = str(document["id"])
-    cameras = [load_camera({k: v for k, v in record.items() if k != "site"}) for record in document["cameras"]]
+    cameras = [load_camera({k: v for k, v in record.items() if k != "site"})
+               for record in document["cameras"]]
     room = tuple(float(v) for v in document["room_m"])
     if len(room) != 4 or room[0] >= room[2] or room[1] >= room[3]:
         raise ValueError(f"{path}: room_m must be [x0, y0, x1, y1] with x0 < x1 and y0 < y1")
@@ -152,10 +154,11 @@ def load_plan(path: str | Path) -> SitePlan:
         site_id=site_id,
         room_m=(room[0], room[1], room[2], room[3]),
         cameras=cameras,
-        doors=[Door(str(d["wall"]), float(d["at_m"]), float(d.get("width_m", 1.2))) for d in document["doors"]],
+        doors=[Door(str(d["wall"]), float(d["at_m"]), float(d.get("width_m", 1.2)))
+               for d in document["doors"]],
         zones={name: [(float(x), float(y)) for x, y in polygon]
                for name, polygon in (document.get("zones") or {}).items()},
-        lines=lines,  # type: ignore[arg-type]
+        lines=lines,
     )
 
 
@@ -190,8 +193,9 @@ def _furniture(rng: np.random.Generator, plan: SitePlan, keep_clear: list[FloatA
     candidates: list[obj.Placed] = [
         obj.cabinet(float(x1 - 0.35), float(y0 + 1.8), np.pi / 2, 2.4, 0.5, 1.0,
                     mat(scene_color("furniture", SEQUENCE_SPLIT, rng))),
-        obj.bench(float(x0 + 2.5), float(y1 - 0.5), 0.0, 1.8, mat(scene_color("wood", SEQUENCE_SPLIT, rng)), legs),
-        obj.bench(float(-1.0), float(y0 + 0.5), 0.0, 2.0, mat(scene_color("wood", SEQUENCE_SPLIT, rng)), legs),
+        obj.bench(float(x0 + 2.5), float(y1 - 0.5), 0.0, 1.8, mat(scene_color("wood", SEQUENCE_SPLIT, rng)),
+                  legs),
+        obj.bench((-1.0), float(y0 + 0.5), 0.0, 2.0, mat(scene_color("wood", SEQUENCE_SPLIT, rng)), legs),
         obj.table(float(x0 + 1.6), float(y0 + 1.2), 0.0, 1.6, 0.8, 0.74, top, legs),
         obj.chair(float(x0 + 1.2), float(y0 + 0.5), np.pi / 2, 0.46, seat, legs),
         obj.chair(float(x0 + 2.0), float(y0 + 0.5), np.pi / 2, 0.46, seat, legs),
@@ -215,7 +219,8 @@ def build_site_world(plan: SitePlan, seed: int) -> SiteWorld:
     room = plan.room_m
     altitude = max(c.altitude_m for c in plan.cameras)
     floor_kind = str(rng.choice(("tiles", "wood", "concrete")))
-    floor = floor_texture(floor_kind, scene_palette(floor_kind, SEQUENCE_SPLIT, rng), rng, rng.uniform(0.3, 0.6))
+    floor = floor_texture(floor_kind, scene_palette(floor_kind, SEQUENCE_SPLIT, rng), rng,
+                          rng.uniform(0.3, 0.6))
     second = floor_texture("carpet", scene_palette("carpet", SEQUENCE_SPLIT, rng), rng, 0.5)
     canvas = floor_canvas(room, 0.03)
     canvas.multiply_noise(rng, 0.08, 3, slice(0, 3))
@@ -241,7 +246,7 @@ def build_site_world(plan: SitePlan, seed: int) -> SiteWorld:
     keep_clear = [d.threshold_m(room, 0.8) for d in plan.doors]
     items = _furniture(rng, plan, keep_clear)
     walk = (room[0] + 0.3, room[1] + 0.3, room[2] - 0.3, room[3] - 0.3)
-    scene = Scene(f"site-{plan.site_id}-{seed}", SEQUENCE_SPLIT, "indoor", "hall", plan.cameras[0], env, items,
-                  walk)
+    scene = Scene(f"site-{plan.site_id}-{seed}", SEQUENCE_SPLIT, "indoor", "hall", plan.cameras[0], env,
+                  items, walk)
     obstacles = np.array([o.footprint for o in items], dtype=np.float64).reshape(-1, 3)
     return SiteWorld(plan, scene, obstacles)

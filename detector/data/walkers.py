@@ -198,7 +198,8 @@ def _offset_route(route: _Route, side_m: float, delay_s: float) -> _Route:
 
 
 def _walker(track_id: int, route: _Route, times: FloatArray, phase0: float) -> Walker:
-    positions, walking, distance = _sample_route(route.points, route.pauses, route.speed_mps, route.start_s, times)
+    positions, walking, distance = _sample_route(route.points, route.pauses, route.speed_mps, route.start_s,
+                                                 times)
     steps = np.diff(positions, axis=0, prepend=positions[:1])
     headings = np.arctan2(steps[:, 1], steps[:, 0])
     # Standing still keeps the last heading of a walk (or faces the first leg).
