@@ -1,4 +1,5 @@
-"""The web viewer: one HTML page at `/` and its ES modules and style sheet, shipped in the package.
+"""The web viewer: its HTML pages (`/`, and the live site map at `/site`) and their ES modules and
+style sheets, shipped in the package.
 
 No build step and nothing from elsewhere: the page talks only to this service's REST API, and its
 Content-Security-Policy forbids any other origin, so it works on a closed network.
@@ -37,6 +38,11 @@ def _read_asset(name: str) -> bytes:
 @router.get("/", response_class=Response)
 async def index() -> Response:
     return Response(_read_asset("index.html"), media_type="text/html; charset=utf-8", headers=_HEADERS)
+
+
+@router.get("/site", response_class=Response)
+async def site_map() -> Response:
+    return Response(_read_asset("site.html"), media_type="text/html; charset=utf-8", headers=_HEADERS)
 
 
 @router.get("/viewer/{name}", response_class=Response)
