@@ -5,7 +5,7 @@ in through a door (or already inside when the sequence starts), to one to three 
 room (some near the zones), pausing at some of them, and out through a door (or still inside at
 the end). Some arrive as groups of two or three who walk side by side. A route is kept only when it
 stays clear of the furniture and keeps 0.55 m from everyone already planned who is not in its
-group, so bodies never pass through each other.
+group (and 0.5 m from those who are), so bodies never pass through each other.
 
 `sample_walkers` plans everyone from (seed, plan, steps); `Walker.state(step)` answers where a
 person stands at a step, facing which way, walking or standing, and their gait phase.
@@ -27,6 +27,7 @@ _GAP_M = 0.55  # closest two people who are not walking together come
 _CLEAR_M = 0.3  # room kept between a person and furniture
 _DOOR_INSET_M = 0.35  # where a person appears or vanishes in a doorway
 _GROUP_SPACING_M = 0.65
+_GROUP_GAP_M = 0.5  # closest two people walking together come (a sharp turn would cross their paths)
 
 
 @dataclass(frozen=True)
@@ -180,6 +181,16 @@ class _Planner:
         return True
 
 
+def _apart(members: list[Walker], gap_m: float) -> bool:
+    """True when no two of `members` ever come within `gap_m` of each other."""
+    for k, one in enumerate(members):
+        for other in members[k + 1:]:
+            gap = np.hypot(*(one.positions_m - other.positions_m).T)
+            if np.any(gap[np.isfinite(gap)] < gap_m):
+                return False
+    return True
+
+
 def _segment_distance(p: FloatArray, a: FloatArray, b: FloatArray) -> float:
     ab = b - a
     along = float(np.clip((p - a) @ ab / max(float(ab @ ab), 1e-12), 0.0, 1.0))
@@ -239,7 +250,7 @@ def sample_walkers(world: SiteWorld, steps: int, fps: float, seed: int, people: 
             continue
         if not all(planner.companion_clear(r) for r in group[1:]):
             continue
-        if not planner.fits([m.positions_m for m in members]):
+        if not planner.fits([m.positions_m for m in members]) or not _apart(members, _GROUP_GAP_M):
             continue
         planner.tracks += [m.positions_m for m in members]
         walkers += members
