@@ -80,7 +80,7 @@ function trailLayer(trails) {
 
 /**
  * Draw the live map into the <svg> `root` (contents replaced).
- * cameras: [{camera, origin: [x, y], yawDeg}]; zones: [{id, polygon}]; lines: [{id, from, to}];
+ * cameras: [{camera, origin: [x, y], yawDeg, view: [[x, y], ...] m or null}]; zones: [{id, polygon}]; lines: [{id, from, to}];
  * occupancy: the service's occupancy answer; trails: Map track id -> [[x, y], ...] m, oldest first.
  */
 export function drawSiteMap(root, { cameras, zones, lines, occupancy, trails }) {
@@ -90,6 +90,14 @@ export function drawSiteMap(root, { cameras, zones, lines, occupancy, trails }) 
   const bounds = siteBounds({ cameras, zones, lines, people });
   drawMap(root, { cameras: cameras.map((c) => ({ ...c, showRings: false })), people, bounds });
   const fontM = fontSizeM(root);
+  // The floor a camera can place people on, as the service outlines it (else the fov circle).
+  for (const { camera, view } of cameras) {
+    const circle = root.querySelector(`g.camera[data-camera="${CSS.escape(camera.id)}"] circle.fov`);
+    if (circle && view?.length > 2) {
+      circle.replaceWith(svg("polygon", { class: "fov view", "data-camera": camera.id,
+                                          points: pointsAttr(view.map(([x, y]) => [x, -y])) }));
+    }
+  }
   root.querySelectorAll("circle.person").forEach((dot, i) => {
     dot.dataset.track = people[i].label;
   });

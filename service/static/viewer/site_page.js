@@ -48,12 +48,13 @@ function entries(value, pick) {
 async function loadSite(siteId) {
   const sitePath = `/v1/sites/${encodeURIComponent(siteId)}`;
   const [site, cameras] = await Promise.all([getJson(sitePath), getJson("/v1/cameras")]);
-  const members = new Set((site.cameras ?? []).map((c) => (typeof c === "string" ? c : c.id)));
-  const posed = cameras.cameras.filter((c) => (c.site === siteId || members.has(c.id)) && c.site_pose);
+  const views = new Map((site.cameras ?? []).map((c) => (typeof c === "string" ? [c, null] : [c.id, c.view_m])));
+  const posed = cameras.cameras.filter((c) => (c.site === siteId || views.has(c.id)) && c.site_pose);
   return {
     id: siteId,
     cameras: posed.map((camera) => ({
       camera, origin: [camera.site_pose.x_m ?? 0, camera.site_pose.y_m ?? 0], yawDeg: camera.site_pose.yaw_deg ?? 0,
+      view: views.get(camera.id) ?? null,
     })),
     zones: entries(site.zones, (z) => (z.polygon_m ? { id: z.id, polygon: z.polygon_m } : null)),
     lines: entries(site.lines, (l) => (l.from_m && l.to_m ? { id: l.id, from: l.from_m, to: l.to_m } : null)),
@@ -132,6 +133,11 @@ function follow(siteId) {
     document.body.dataset.state = "live";
   });
   source.addEventListener("error", () => setLive(false)); // EventSource reconnects by itself
+  source.addEventListener("end", () => { // the site has no camera left
+    source.close();
+    setLive(false);
+    $("live").textContent = "site closed";
+  });
 }
 
 async function showSite(siteId) {

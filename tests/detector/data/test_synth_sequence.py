@@ -27,7 +27,8 @@ def sequence(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, 
     return folder, write_sequence(folder, CONFIG, workers=1)
 
 
-def _inside_box(uv: np.ndarray, box: list[float], principal_point: tuple[float, float], margin_px: float) -> bool:
+def _inside_box(uv: np.ndarray, box: list[float], principal_point: tuple[float, float],
+                margin_px: float) -> bool:
     """Is pixel `uv` inside the radius-aligned box (cx, cy, w, h), grown by `margin_px`?"""
     cx, cy, w, h = box
     radial = np.array([cx - principal_point[0], cy - principal_point[1]])
@@ -45,7 +46,8 @@ def test_a_posed_grid_looks_at_the_world_from_its_pose() -> None:
     assert np.array_equal(posed.valid, local.valid)
     rays = posed.directions[posed.valid].astype(np.float64)
     points_world = posed.origin + 2.5 * rays
-    points_camera = np.array([0.0, 0.0, camera.altitude_m]) + 2.5 * local.directions[local.valid].astype(np.float64)
+    local_rays = local.directions[local.valid].astype(np.float64)
+    points_camera = np.array([0.0, 0.0, camera.altitude_m]) + 2.5 * local_rays
     assert np.allclose(posed.world_to_camera(points_world), points_camera, atol=1e-5)
     unposed = posed_grid(local, (0.0, 0.0), 0.0)
     assert np.array_equal(unposed.directions, local.directions)
