@@ -32,9 +32,10 @@ GATE_M = 0.75
 
 @dataclass
 class Reported:
-    """What the site reported after each step: `people` (track id -> (x, y)) per step, zone counts
-    per step, and the line tallies before the first step and after the last."""
+    """What the site reported after each step: `people` (track id -> (x, y)), zone counts and the
+    site's `times` per step, and the line tallies before the first step and after the last."""
 
+    times: list[float | None] = field(default_factory=list)
     people: list[dict[str, tuple[float, float]]] = field(default_factory=list)
     zone_counts: list[dict[str, int]] = field(default_factory=list)
     lines_before: dict[str, dict[str, int]] = field(default_factory=dict)
@@ -42,6 +43,7 @@ class Reported:
 
     def add(self, occupancy: dict[str, Any]) -> None:
         """Record the occupancy answer (DESIGN.md's shape) read after a step."""
+        self.times.append(occupancy.get("time"))
         self.people.append({str(p["track_id"]): (float(p["position_m"][0]), float(p["position_m"][1]))
                             for p in occupancy.get("people", []) if p.get("position_m") is not None})
         self.zone_counts.append({z: int(v["count"]) for z, v in (occupancy.get("zones") or {}).items()})
