@@ -112,7 +112,7 @@ def _lens(camera_id: str, altitude_m: float, pose: SitePose, offset_px: tuple[fl
 
 def default_plan() -> SitePlan:
     """The built-in site: a 15 m x 9 m hall, two 3 m-high cameras 6.5 m apart turned 35° from each
-    other, a door in the west wall with a counting line 1.3 m inside it, a door in the north wall
+    other, a door in the west wall with a counting line 1.5 m inside it, a door in the north wall
     with its own line, and three zones (the entrance, the middle where both cameras overlap, a
     counter in the south-east corner)."""
     cameras = [
@@ -131,8 +131,8 @@ def default_plan() -> SitePlan:
         },
         # Looking from `from_m` to `to_m` the door is on the left: walking in counts `in`.
         lines={
-            "west-door": ((-6.2, -1.2), (-6.2, 1.2)),
-            "north-door": ((2.9, 3.2), (5.1, 3.2)),
+            "west-door": ((-6.0, -1.2), (-6.0, 1.2)),
+            "north-door": ((2.9, 3.0), (5.1, 3.0)),
         },
     )
 

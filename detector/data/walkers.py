@@ -69,6 +69,8 @@ class _Route:
     pauses: FloatArray
     start_s: float
     speed_mps: float
+    # Per end (first, last): the axis (0: x, 1: y) across the wall of the doorway it is in, or None.
+    door_axes: tuple[int | None, int | None] = (None, None)
 
 
 def _sample_route(points: FloatArray, pauses: FloatArray, speed: float, start_s: float, times: FloatArray
@@ -110,6 +112,7 @@ class _Planner:
         x0, y0, x1, y1 = world.plan.room_m
         self.area = (x0 + 0.6, y0 + 0.6, x1 - 0.6, y1 - 0.6)
         self.doors = [d.threshold_m(world.plan.room_m, _DOOR_INSET_M) for d in world.plan.doors]
+        self.door_axes = [0 if d.wall in ("west", "east") else 1 for d in world.plan.doors]
         self.lines = [(np.array(a), np.array(b)) for a, b in world.plan.lines.values()]
         self.zone_centres = [np.mean(np.array(p), axis=0) for p in world.plan.zones.values()]
 
@@ -142,28 +145,32 @@ class _Planner:
     def route(self, start_s: float, inside: bool, leave: bool) -> _Route | None:
         rng = self.rng
         points: list[FloatArray] = []
+        axes: list[int | None] = [None, None]
         if inside:
             first = self.waypoint()
             if first is None:
                 return None
             points.append(first)
         else:
-            points.append(self.doors[int(rng.integers(len(self.doors)))])
+            entry = int(rng.integers(len(self.doors)))
+            points.append(self.doors[entry])
+            axes[0] = self.door_axes[entry]
         for _ in range(int(rng.integers(1, 4))):
             p = self.waypoint()
             if p is None or not self._clear_leg(points[-1], p):
                 return None
             points.append(p)
         if leave:
-            door = self.doors[int(rng.integers(len(self.doors)))]
-            if not self._clear_leg(points[-1], door):
+            exit_ = int(rng.integers(len(self.doors)))
+            if not self._clear_leg(points[-1], self.doors[exit_]):
                 return None
-            points.append(door)
+            points.append(self.doors[exit_])
+            axes[1] = self.door_axes[exit_]
         pauses = np.where(rng.random(len(points)) < 0.45, rng.uniform(1.0, 6.0, len(points)), 0.0)
         pauses[0] = rng.uniform(2.0, 8.0) if inside else 0.0
         if leave:
             pauses[-1] = 0.0
-        return _Route(np.array(points), pauses, start_s, float(rng.uniform(1.0, 1.5)))
+        return _Route(np.array(points), pauses, start_s, float(rng.uniform(1.0, 1.5)), (axes[0], axes[1]))
 
     def companion_clear(self, route: _Route) -> bool:
         """A companion's shifted waypoints (its first and last may be doorways) and legs are clear."""
@@ -205,7 +212,13 @@ def _offset_route(route: _Route, side_m: float, delay_s: float) -> _Route:
         b = route.points[min(k + 1, len(points) - 1)]
         direction = (b - a) / max(float(np.hypot(*(b - a))), 1e-9)
         points[k] = route.points[k] + side_m * np.array([-direction[1], direction[0]])
-    return _Route(points, route.pauses, route.start_s + delay_s, route.speed_mps)
+    # Side by side in a doorway means along the wall: they come in (or go out) through it together.
+    for k, axis in ((0, route.door_axes[0]), (len(points) - 1, route.door_axes[1])):
+        if axis is not None:
+            along = 1 - axis
+            points[k, axis] = route.points[k, axis]
+            points[k, along] = route.points[k, along] + np.sign(side_m) * min(abs(side_m), 0.5)
+    return _Route(points, route.pauses, route.start_s + delay_s, route.speed_mps, route.door_axes)
 
 
 def _walker(track_id: int, route: _Route, times: FloatArray, phase0: float) -> Walker:
