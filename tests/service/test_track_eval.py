@@ -35,8 +35,8 @@ def sequence_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
     folder = tmp_path_factory.mktemp("track-server")
-    settings = Settings(model=DEFAULT_MODEL_PATH, database=str(folder / "cameras.db"), http_port=0, grpc_port=-1,
-                        threads=1, demo_camera=False)
+    settings = Settings(model=DEFAULT_MODEL_PATH, database=str(folder / "cameras.db"), http_port=0,
+                        grpc_port=-1, threads=1, demo_camera=False)
     with LiveServer(settings) as live:
         yield live
 
@@ -48,10 +48,11 @@ def _figures(path: Path) -> dict[str, Any]:
 
 def test_the_tracker_alone_follows_the_true_positions(sequence_file: Path, tmp_path: Path) -> None:
     out = tmp_path / "gt.json"
-    assert main(["eval", "--tracks", "--data", str(sequence_file), "--ground-truth-detections", "--json", str(out),
-                 "--quiet"]) == 0
+    assert main(["eval", "--tracks", "--data", str(sequence_file), "--ground-truth-detections",
+                 "--json", str(out), "--quiet"]) == 0
     figures = _figures(out)
-    assert (figures["mode"], figures["steps"], figures["frames"]) == ("ground_truth_detections", STEPS, 2 * STEPS)
+    assert figures["mode"] == "ground_truth_detections"
+    assert (figures["steps"], figures["frames"]) == (STEPS, 2 * STEPS)
     # Exact positions: no false people, no duplicates, no switches; only the first steps of a new
     # track (before it is confirmed) are missed.
     assert (figures["false_positives"], figures["duplicates"], figures["id_switches"]) == (0, 0, 0)
@@ -81,8 +82,8 @@ def test_playback_through_a_server_installs_the_site_and_tracks_in_capture_time(
 def test_the_command_against_a_server_and_in_process_agree(sequence_file: Path, server: LiveServer,
                                                            tmp_path: Path) -> None:
     remote, local = tmp_path / "server.json", tmp_path / "model.json"
-    assert main(["eval", "--tracks", "--data", str(sequence_file), "--server", server.url, "--json", str(remote),
-                 "--quiet"]) == 0
+    assert main(["eval", "--tracks", "--data", str(sequence_file), "--server", server.url,
+                 "--json", str(remote), "--quiet"]) == 0
     assert main(["eval", "--tracks", "--data", str(sequence_file), "--model", str(DEFAULT_MODEL_PATH),
                  "--threads", "1", "--json", str(local), "--quiet"]) == 0
     a, b = _figures(remote), _figures(local)
@@ -99,8 +100,8 @@ def test_bad_arguments_and_files_are_refused(sequence_file: Path, tmp_path: Path
     out = str(tmp_path / "out.json")
     assert main(["eval", "--tracks", "--data", str(not_a_sequence), "--ground-truth-detections",
                  "--json", out]) == 2
-    assert main(["eval", "--tracks", "--data", str(sequence_file), "--ground-truth-detections", "--noise-m", "-1",
-                 "--json", out]) == 2
+    assert main(["eval", "--tracks", "--data", str(sequence_file), "--ground-truth-detections",
+                 "--noise-m", "-1", "--json", out]) == 2
     with pytest.raises(SystemExit):  # --server, --model and --ground-truth-detections exclude each other
         main(["eval", "--tracks", "--data", str(sequence_file), "--server", "http://127.0.0.1:1",
               "--ground-truth-detections", "--json", out])

@@ -68,6 +68,12 @@ def _reported(people: list[dict[str, tuple[float, float]]], sequence: Sequence) 
     return reported
 
 
+def _truth_report() -> list[dict[str, tuple[float, float]]]:
+    """Both true people at every step they are in, as tracks s:1 and s:2."""
+    steps = range(len(WALK_IN))
+    return [{f"s:{t}": xy for t, xy in ((1, WALK_IN[k]), (2, STAND[k])) if xy is not None} for k in steps]
+
+
 WALK_IN = [None, (0.2, 0.0), (0.6, 0.0), (1.2, 0.0), (1.6, 0.0), (2.4, 0.0)]
 STAND = [(5.0, 5.0)] * 6
 
@@ -75,7 +81,7 @@ STAND = [(5.0, 5.0)] * 6
 def test_a_perfect_report_scores_one_and_line_counts_match() -> None:
     sequence = _sequence({1: WALK_IN, 2: STAND})
     assert true_line_counts(sequence) == {"door": {"in": 1, "out": 0}}
-    people = [{f"s:{t}": xy for t, xy in ((1, WALK_IN[k]), (2, STAND[k])) if xy is not None} for k in range(6)]
+    people = _truth_report()
     reported = _reported(people, sequence)
     reported.lines_after = {"door": {"in": 1, "out": 0}}
     figures = score_sequence(sequence, reported)
@@ -88,7 +94,7 @@ def test_a_perfect_report_scores_one_and_line_counts_match() -> None:
 
 def test_a_person_reported_twice_is_a_duplicate_and_a_lost_line_count_is_an_error() -> None:
     sequence = _sequence({1: WALK_IN, 2: STAND})
-    people = [{f"s:{t}": xy for t, xy in ((1, WALK_IN[k]), (2, STAND[k])) if xy is not None} for k in range(6)]
+    people = _truth_report()
     people[3]["s:9"] = (1.5, 0.3)  # a second track 0.42 m from person 1, as an unfused overlap gives
     figures = score_sequence(sequence, _reported(people, sequence))
     assert figures["duplicates"] == 1 and figures["false_positives"] == 1
@@ -110,7 +116,7 @@ def test_a_swapped_id_is_a_switch_and_a_far_report_is_a_miss_and_a_false_positiv
 
 def test_a_person_hidden_from_every_camera_counts_neither_way() -> None:
     sequence = _sequence({1: WALK_IN, 2: STAND}, hidden={(2, 2), (2, 3)})
-    people = [{f"s:{t}": xy for t, xy in ((1, WALK_IN[k]), (2, STAND[k])) if xy is not None} for k in range(6)]
+    people = _truth_report()
     unseen = [dict(p) for p in people]
     for k in (2, 3):
         del unseen[k]["s:2"]
