@@ -114,6 +114,12 @@ def test_the_map_follows_the_site_live(driver: Any, server: LiveServer, sequence
     assert {t["track"] for t in state["trails"]} <= set(people) and max(t["points"] for t in state["trails"]) > 2
     assert state["live"] == "on"
     save_screenshot(driver, "site_map.png", capsys)
+    # Framing the cameras' whole views widens the map to hold each view's outline.
+    narrow = driver.execute_script("return JSON.parse(document.getElementById('live-map').dataset.bounds)")
+    driver.execute_script("const s = document.getElementById('map-extent'); s.value = 'views';"
+                          "s.dispatchEvent(new Event('change'));")
+    wide = driver.execute_script("return JSON.parse(document.getElementById('live-map').dataset.bounds)")
+    assert wide["xmax"] - wide["xmin"] > narrow["xmax"] - narrow["xmin"] + 10
     assert console_errors(driver) == []
 
 

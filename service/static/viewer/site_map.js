@@ -7,9 +7,9 @@ import { drawMap } from "./floor_map.js";
 
 const CAMERA_REACH_M = 5; // the map shows at least this much floor round every camera
 
-/** Bounds {xmin, xmax, ymin, ymax} m holding the cameras (with some floor round them), zones,
- *  lines and people, plus a margin. */
-export function siteBounds({ cameras, zones, lines, people }) {
+/** Bounds {xmin, xmax, ymin, ymax} m holding the cameras (with some floor round them, or their
+ *  whole views with `withViews`), zones, lines and people, plus a margin. */
+export function siteBounds({ cameras, zones, lines, people, withViews = false }) {
   const xs = [];
   const ys = [];
   for (const { origin: [x, y] } of cameras) {
@@ -17,7 +17,7 @@ export function siteBounds({ cameras, zones, lines, people }) {
     ys.push(y - CAMERA_REACH_M, y + CAMERA_REACH_M);
   }
   const points = [...zones.flatMap((z) => z.polygon), ...lines.flatMap((l) => [l.from, l.to]),
-                  ...people.map((p) => p.xy)];
+                  ...people.map((p) => p.xy), ...(withViews ? cameras.flatMap((c) => c.view ?? []) : [])];
   for (const [x, y] of points) {
     xs.push(x);
     ys.push(y);
@@ -81,13 +81,14 @@ function trailLayer(trails) {
 /**
  * Draw the live map into the <svg> `root` (contents replaced).
  * cameras: [{camera, origin: [x, y], yawDeg, view: [[x, y], ...] m or null}]; zones: [{id, polygon}]; lines: [{id, from, to}];
- * occupancy: the service's occupancy answer; trails: Map track id -> [[x, y], ...] m, oldest first.
+ * occupancy: the service's occupancy answer; trails: Map track id -> [[x, y], ...] m, oldest first;
+ * withViews: frame the cameras' whole views rather than the site's zones, lines and people.
  */
-export function drawSiteMap(root, { cameras, zones, lines, occupancy, trails }) {
+export function drawSiteMap(root, { cameras, zones, lines, occupancy, trails, withViews = false }) {
   const people = (occupancy?.people ?? []).filter((p) => p.position_m).map((p, index) => ({
     xy: p.position_m, label: p.track_id, cameraId: (p.cameras ?? []).join(","), index,
   }));
-  const bounds = siteBounds({ cameras, zones, lines, people });
+  const bounds = siteBounds({ cameras, zones, lines, people, withViews });
   drawMap(root, { cameras: cameras.map((c) => ({ ...c, showRings: false })), people, bounds });
   const fontM = fontSizeM(root);
   // The floor a camera can place people on, as the service outlines it (else the fov circle).

@@ -101,6 +101,7 @@ function render() {
   drawSiteMap($("live-map"), {
     cameras: state.site.cameras, zones: state.site.zones, lines: state.site.lines, occupancy: state.occupancy,
     trails: new Map([...state.trails].map(([id, points]) => [id, points.map((p) => p.xy)])),
+    withViews: $("map-extent").value === "views",
   });
   renderFigures(state.occupancy);
   document.body.dataset.updates = String(state.updates);
@@ -188,6 +189,7 @@ async function main() {
   renderSiteList();
   window.addEventListener("hashchange", route);
   $("trail-seconds").addEventListener("change", render);
+  $("map-extent").addEventListener("change", render);
   window.addEventListener("resize", render);
   await route();
 }
