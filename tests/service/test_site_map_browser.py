@@ -38,8 +38,10 @@ return {
   labels: all('#live-map text.person-label').map((t) => t.textContent),
   trails: all('#live-map polyline.trail').map((p) => ({
     track: p.dataset.track, points: p.getAttribute('points').trim().split(' ').length})),
-  zones: Object.fromEntries(all('#live-map polygon.zone').map((z) => [z.dataset.zone, Number(z.dataset.count)])),
-  zoneList: Object.fromEntries(all('#zone-list li').map((li) => [li.dataset.zone, li.querySelector('b').textContent])),
+  zones: Object.fromEntries(all('#live-map polygon.zone').map(
+    (z) => [z.dataset.zone, Number(z.dataset.count)])),
+  zoneList: Object.fromEntries(all('#zone-list li').map(
+    (li) => [li.dataset.zone, li.querySelector('b').textContent])),
   lines: Object.fromEntries(all('#live-map line.count-line').map(
     (l) => [l.dataset.line, {in: Number(l.dataset.in), out: Number(l.dataset.out)}])),
   views: all('#live-map polygon.fov.view').map((p) => p.dataset.camera).sort(),
@@ -111,7 +113,8 @@ def test_the_map_follows_the_site_live(driver: Any, server: LiveServer, sequence
     assert state["lines"] == occupancy["lines"]
     # Tracks seen over several updates leave trails; only tracks there now have one.
     assert state["updates"] > 1 and state["trails"]
-    assert {t["track"] for t in state["trails"]} <= set(people) and max(t["points"] for t in state["trails"]) > 2
+    assert {t["track"] for t in state["trails"]} <= set(people)
+    assert max(t["points"] for t in state["trails"]) > 2
     assert state["live"] == "on"
     save_screenshot(driver, "site_map.png", capsys)
     # Framing the cameras' whole views widens the map to hold each view's outline.
@@ -127,8 +130,9 @@ def test_the_viewer_links_the_map_and_a_server_without_sites_says_so(
         driver: Any, settings_for: Callable[..., Settings], tmp_path: Path) -> None:
     with LiveServer(settings_for()) as empty:
         driver.get(f"{empty.url}/")
-        wait_for(lambda: driver.execute_script("return document.getElementById('live-site-link')"), "the viewer")
-        assert driver.execute_script("return document.getElementById('live-site-link').getAttribute('href')") == "/site"
+        link = "return document.getElementById('live-site-link')"
+        wait_for(lambda: driver.execute_script(link), "the viewer")
+        assert driver.execute_script(f"{link}.getAttribute('href')") == "/site"
         driver.get(f"{empty.url}/site")
         wait_for(lambda: map_state(driver)["state"] == "empty", "the page to find no site")
         status = driver.execute_script("return document.getElementById('status').textContent")
