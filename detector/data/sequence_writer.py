@@ -20,7 +20,7 @@ from typing import Any
 import cv2
 
 from detector.data.sequence import SequenceConfig, SequenceFrame, SequenceRenderer
-from detector.data.synth_writer import ANNOTATIONS_FILE, CATEGORIES, person_record
+from detector.data.synth_writer import ANNOTATIONS_FILE, CATEGORIES, collect_records, person_record
 from fisheye import camera_to_dict
 
 _renderer: SequenceRenderer | None = None
@@ -112,15 +112,7 @@ def write_sequence(out_dir: str | Path, config: SequenceConfig, workers: int = 1
     out = Path(out_dir)
     for camera in config.plan.cameras:
         (out / camera.id).mkdir(parents=True, exist_ok=True)
-    image_records: list[dict[str, Any]] = []
-    annotations: list[dict[str, Any]] = []
-    for image, people in _frames(config, out, workers):
-        image_records.append(image)
-        for record in people:
-            record["id"] = len(annotations) + 1
-            annotations.append(record)
-        if on_frame is not None:
-            on_frame()
+    image_records, annotations = collect_records(_frames(config, out, workers), on_frame)
     renderer = SequenceRenderer(config)
     document = {
         "info": {

@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import multiprocessing
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -83,20 +83,28 @@ def _frames(images: int, seed: int, split: str, config: SynthConfig, out_dir: Pa
         yield from pool.imap(work, range(images), chunksize=config.images_per_scene)
 
 
-def write_dataset(out_dir: str | Path, images: int, seed: int, split: str, config: SynthConfig,
-                  workers: int = 1, on_frame: Callable[[], None] | None = None) -> dict[str, Any]:
-    """Render `images` frames into `out_dir`, write `annotations.json`, and return its content."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+def collect_records(frames: Iterable[tuple[dict[str, Any], list[dict[str, Any]]]],
+                    on_frame: Callable[[], None] | None = None) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """The `images` and `annotations` lists of frames' records, the annotations numbered in order."""
     image_records: list[dict[str, Any]] = []
     annotations: list[dict[str, Any]] = []
-    for image, people in _frames(images, seed, split, config, out, workers):
+    for image, people in frames:
         image_records.append(image)
         for record in people:
             record["id"] = len(annotations) + 1
             annotations.append(record)
         if on_frame is not None:
             on_frame()
+    return image_records, annotations
+
+
+def write_dataset(out_dir: str | Path, images: int, seed: int, split: str, config: SynthConfig,
+                  workers: int = 1, on_frame: Callable[[], None] | None = None) -> dict[str, Any]:
+    """Render `images` frames into `out_dir`, write `annotations.json`, and return its content."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    frames = _frames(images, seed, split, config, out, workers)
+    image_records, annotations = collect_records(frames, on_frame)
     document = {
         "info": {
             "description": "FishLoc synthetic overhead fisheye frames",

@@ -13,12 +13,9 @@ from typing import Any
 import httpx
 import pytest
 from service_live_server import LiveServer
+from site_sequences import render_sequence, shipped_model_server
 from viewer_browser import chromium_driver, console_errors, save_screenshot, wait_for
 
-from detector.data.sequence import SequenceConfig
-from detector.data.sequence_writer import write_sequence
-from detector.data.site_world import default_plan
-from models import DEFAULT_MODEL_PATH
 from service.config import Settings
 from service.sequence_data import Sequence, read_sequence
 from service.track_playback import ServerClient, install
@@ -59,17 +56,12 @@ def driver() -> Iterator[Any]:
 
 @pytest.fixture(scope="module")
 def sequence(tmp_path_factory: pytest.TempPathFactory) -> Sequence:
-    folder = tmp_path_factory.mktemp("site-map-sequence")
-    write_sequence(folder, SequenceConfig(plan=default_plan(), steps=STEPS, fps=5.0, seed=31, size=512))
-    return read_sequence(folder / "annotations.json")
+    return read_sequence(render_sequence(tmp_path_factory.mktemp("site-map-sequence"), STEPS, seed=31))
 
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
-    folder = tmp_path_factory.mktemp("site-map")
-    settings = Settings(model=DEFAULT_MODEL_PATH, database=str(folder / "cameras.db"), http_port=0,
-                        grpc_port=-1, threads=1, demo_camera=False)
-    with LiveServer(settings) as live:
+    with shipped_model_server(tmp_path_factory.mktemp("site-map")) as live:
         yield live
 
 

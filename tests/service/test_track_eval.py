@@ -11,33 +11,24 @@ from typing import Any
 import httpx
 import pytest
 from service_live_server import LiveServer
+from site_sequences import render_sequence, shipped_model_server
 
-from detector.data.sequence import SequenceConfig
-from detector.data.sequence_writer import write_sequence
-from detector.data.site_world import default_plan
 from models import DEFAULT_MODEL_PATH
 from service.cli import main
-from service.config import Settings
 from service.sequence_data import read_sequence
 from service.track_playback import ServerClient, play_through_server
 
 STEPS = 15
-CONFIG = SequenceConfig(plan=default_plan(), steps=STEPS, fps=5.0, seed=21, size=512)
 
 
 @pytest.fixture(scope="module")
 def sequence_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("track-sequence")
-    write_sequence(folder, CONFIG, workers=1)
-    return folder / "annotations.json"
+    return render_sequence(tmp_path_factory.mktemp("track-sequence"), STEPS, seed=21)
 
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
-    folder = tmp_path_factory.mktemp("track-server")
-    settings = Settings(model=DEFAULT_MODEL_PATH, database=str(folder / "cameras.db"), http_port=0,
-                        grpc_port=-1, threads=1, demo_camera=False)
-    with LiveServer(settings) as live:
+    with shipped_model_server(tmp_path_factory.mktemp("track-server")) as live:
         yield live
 
 
