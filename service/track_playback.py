@@ -148,9 +148,11 @@ class LocalServer:
 
     def __init__(self, model: Path, threads: int | None = None) -> None:
         self._folder = tempfile.TemporaryDirectory(prefix="fishloc-tracks-")
-        optional = {} if threads is None else {"threads": threads}
-        self.settings = Settings(model=model, host="127.0.0.1", http_port=0, grpc_port=-1, demo_camera=False,
-                                 database=str(Path(self._folder.name) / "cameras.db"), **optional)
+        values: dict[str, Any] = {"model": model, "host": "127.0.0.1", "http_port": 0, "grpc_port": -1,
+                                  "demo_camera": False, "database": str(Path(self._folder.name) / "cameras.db")}
+        if threads is not None:
+            values["threads"] = threads
+        self.settings = Settings(**values)
         self._thread = threading.Thread(target=self._run, name="fishloc-tracks-server", daemon=True)
         self._started = threading.Event()
         self._error: BaseException | None = None

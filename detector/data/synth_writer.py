@@ -83,8 +83,11 @@ def _frames(images: int, seed: int, split: str, config: SynthConfig, out_dir: Pa
         yield from pool.imap(work, range(images), chunksize=config.images_per_scene)
 
 
-def collect_records(frames: Iterable[tuple[dict[str, Any], list[dict[str, Any]]]],
-                    on_frame: Callable[[], None] | None = None) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+Records = tuple[dict[str, Any], list[dict[str, Any]]]  # a frame's image record and its annotations
+
+
+def collect_records(frames: Iterable[Records], on_frame: Callable[[], None] | None = None
+                    ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """The `images` and `annotations` lists of frames' records, the annotations numbered in order."""
     image_records: list[dict[str, Any]] = []
     annotations: list[dict[str, Any]] = []
