@@ -148,8 +148,9 @@ class LocalServer:
 
     def __init__(self, model: Path, threads: int | None = None) -> None:
         self._folder = tempfile.TemporaryDirectory(prefix="fishloc-tracks-")
+        database = str(Path(self._folder.name) / "cameras.db")
         values: dict[str, Any] = {"model": model, "host": "127.0.0.1", "http_port": 0, "grpc_port": -1,
-                                  "demo_camera": False, "database": str(Path(self._folder.name) / "cameras.db")}
+                                  "demo_camera": False, "database": database}
         if threads is not None:
             values["threads"] = threads
         self.settings = Settings(**values)
