@@ -102,8 +102,9 @@ class SequenceRenderer:
         out = {}
         for walker in self.walkers:
             rng = np.random.default_rng([int(self.config.seed), walker.track_id, 77])
-            out[walker.track_id] = replace(sample_person(rng, 0.0, 0.0, 0.0, "walking"), carried="none"
-                                           if rng.random() < 0.5 else "bag")
+            spec = sample_person(rng, 0.0, 0.0, 0.0, "walking")
+            # People passing through carry a bag or nothing (no box or phone held out for a minute).
+            out[walker.track_id] = replace(spec, carried="none" if rng.random() < 0.5 else "bag")
         return out
 
     @cached_property
