@@ -19,7 +19,12 @@ ASSUMED_ALTITUDE_M = 3.0
 
 
 class CalibrationError(ValueError):
-    """A camera file or calibration that cannot be used; the message names the field at fault."""
+    """A camera file or calibration that cannot be used; the message names the field at fault and
+    `code` says why in a stable, machine-readable word (e.g. `too_few_marks`)."""
+
+    def __init__(self, message: str, code: str = "invalid_camera") -> None:
+        super().__init__(message)
+        self.code = code
 
 
 def _describe(error: ValidationError) -> str:

@@ -108,7 +108,7 @@ def test_opencv_import_scales_to_the_requested_size(tmp_path: Path) -> None:
         (["--image-size", "2952", "2952", "--altitude", "0"], "altitude_m"),
         (["--altitude", "3.2"], "--image-size W H is required"),
         (["--image-size", "2952", "2952", "--altitude", "3.2", "--coefficients", "7"], "coefficients"),
-        (["--image-size", "100", "100", "--altitude", "3.2"], "principal_point"),
+        (["--image-size", "100", "100", "--altitude", "3.2"], "lies outside the 100x100 image"),
         (["--image-size", "2952", "2952", "--altitude", "3.2", "--id", "no spaces"], "id"),
     ],
 )
