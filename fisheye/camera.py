@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from fisheye.arrays import as_points
+from fisheye.arrays import as_points, resolution_scale, scale_pixels
 from fisheye.lens import monotonic_violation, radius_to_theta, theta_to_radius
 from fisheye.masks import MAX_MASKS, points_in_masks, polygon_problem
 from fisheye.site import SitePose
@@ -175,24 +175,19 @@ class FisheyeCamera(BaseModel):
         width, height = int(resolution_wh[0]), int(resolution_wh[1])
         if (width, height) == tuple(self.image_size):
             return self
-        calib_w, calib_h = self.image_size
-        if width < 1 or height < 1:
-            raise ValueError(f"frame size must be positive, got {width}x{height}")
-        if abs(width * calib_h - height * calib_w) > _ASPECT_TOLERANCE_PX * max(calib_w, calib_h):
-            raise ValueError(
-                f"frame {width}x{height} does not have the aspect ratio of camera {self.id!r}'s "
-                f"calibration ({calib_w}x{calib_h})"
-            )
-        scale_u, scale_v = width / calib_w, height / calib_h
+        try:
+            scale = resolution_scale(self.image_size, (width, height), _ASPECT_TOLERANCE_PX)
+        except ValueError as error:
+            raise ValueError(f"camera {self.id!r}: {error} (its calibration)") from None
         u0, v0 = self.principal_point
         fx, fy = self.focal_px
         update: dict[str, object] = {
             "image_size": (width, height),
-            "principal_point": ((u0 + 0.5) * scale_u - 0.5, (v0 + 0.5) * scale_v - 0.5),
-            "focal_px": (fx * scale_u, fy * scale_v),
+            "principal_point": ((u0 + 0.5) * scale[0] - 0.5, (v0 + 0.5) * scale[1] - 0.5),
+            "focal_px": (fx * scale[0], fy * scale[1]),
         }
         if self.masks_px:
-            update["masks_px"] = [[((u + 0.5) * scale_u - 0.5, (v + 0.5) * scale_v - 0.5) for u, v in polygon]
+            update["masks_px"] = [[(float(u), float(v)) for u, v in scale_pixels(polygon, scale)]
                                   for polygon in self.masks_px]
         return self.model_copy(update=update)
 

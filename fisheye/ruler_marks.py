@@ -194,7 +194,7 @@ def simulate_ruler_marks(
     displaced by Gaussian noise of `noise_px` per axis. For planning a calibration and for tests."""
     rng = np.random.default_rng(seed)
     distances = np.asarray(distances_m, dtype=np.float64).reshape(-1)
-    uv = [np.zeros((1, 2)) + camera.principal_point]
+    uv = [camera.floor_to_pixels(np.zeros((1, 2)))]  # the principal point, unless the camera is tilted
     distance, xy, labels = [np.zeros(1)], [np.zeros((1, 2))], ["nadir"]
     for direction in np.asarray(directions_deg, dtype=np.float64).reshape(-1):
         unit = np.array([math.cos(math.radians(direction)), math.sin(math.radians(direction))])
