@@ -27,10 +27,11 @@ class CalibrationError(ValueError):
         self.code = code
 
 
-def _describe(error: ValidationError) -> str:
+def describe_validation_error(error: ValidationError, whole: str = "camera") -> str:
+    """Every problem of a pydantic validation as `field: message`, joined by '; '."""
     parts = []
     for item in error.errors():
-        field = ".".join(str(p) for p in item["loc"]) or "camera"
+        field = ".".join(str(p) for p in item["loc"]) or whole
         parts.append(f"{field}: {item['msg']}")
     return "; ".join(parts)
 
@@ -40,7 +41,7 @@ def camera_from_dict(record: Mapping[str, Any]) -> FisheyeCamera:
     try:
         return FisheyeCamera.model_validate(dict(record))
     except ValidationError as error:
-        raise CalibrationError(f"invalid camera: {_describe(error)}") from None
+        raise CalibrationError(f"invalid camera: {describe_validation_error(error)}") from None
 
 
 def read_camera_records(path: str | Path) -> list[dict[str, Any]]:

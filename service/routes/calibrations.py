@@ -6,7 +6,6 @@ once; saving the camera is a `PUT /v1/cameras/{id}`. Nothing is written here.
 
 from __future__ import annotations
 
-import json
 import math
 from typing import Any
 
@@ -27,9 +26,10 @@ from fisheye import (
 from fisheye.arrays import resolution_scale, scale_pixels
 from fisheye.calibration import MAX_COEFFICIENTS
 from fisheye.camera import CAMERA_ID_PATTERN
+from fisheye.camera_file import describe_validation_error
 from service.dependencies import State
 from service.errors import ApiError
-from service.request_body import BodyLimits, read_body
+from service.request_body import BodyLimits, read_json
 from service.schemas import CalibrationFit, error_responses
 
 router = APIRouter(tags=["calibrations"])
@@ -102,14 +102,6 @@ def _inline_schema(model: type[BaseModel]) -> dict[str, Any]:
     return dict(resolve(schema))
 
 
-def _describe(error: ValidationError) -> str:
-    parts = []
-    for item in error.errors():
-        field = ".".join(str(p) for p in item["loc"]) or "body"
-        parts.append(f"{field}: {item['msg']}")
-    return "; ".join(parts)
-
-
 def _marks(request: FitRequest) -> RulerMarks:
     """The request's marks at image_size; CalibrationError when they or the frame size are wrong."""
     uv = np.array([[mark.u, mark.v] for mark in request.marks], dtype=np.float64)
@@ -177,17 +169,12 @@ def fit_to_json(request: FitRequest, fit: RulerFit) -> dict[str, Any]:
         "application/json": {"schema": _inline_schema(FitRequest)}}}},
 )
 async def fit_calibration(request: Request, state: State) -> JSONResponse:
-    body = await read_body(request, BodyLimits(_MAX_BODY_BYTES, state.settings.body_timeout_s))
-    try:
-        record = json.loads(body)
-    except ValueError as error:  # JSONDecodeError, UnicodeDecodeError, an int of too many digits
-        raise ApiError(400, "bad_json", f"the body is not JSON: {error}") from None
-    except RecursionError:
-        raise ApiError(400, "bad_json", "the body is not a fit request: JSON nested too deeply") from None
+    record = await read_json(request, BodyLimits(_MAX_BODY_BYTES, state.settings.body_timeout_s),
+                             "a fit request")
     try:
         fit_body = FitRequest.model_validate(record)
     except ValidationError as error:
-        raise ApiError(422, "invalid_request", _describe(error)) from None
+        raise ApiError(422, "invalid_request", describe_validation_error(error, "body")) from None
     try:
         fit = await run_in_threadpool(fit_request, fit_body)
     except CalibrationError as error:
