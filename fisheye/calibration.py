@@ -18,7 +18,7 @@ the result says when a constraint was active, i.e. when the unconstrained fit wo
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -203,6 +203,63 @@ def _tilt_notes(tilt_deg: tuple[float, float], sigma_deg: tuple[float, float]) -
     return [FitNote("tilt", fitted)]
 
 
+def _check_marks(marks: RulerMarks, problem: RadialProblem, config: RulerFitConfig,
+                 principal_point: tuple[float, float], fit_centre: bool) -> None:
+    """Refuse marks that cannot give the asked fit (CalibrationError with a code)."""
+    nadir = marks.is_nadir
+    centre_uv = marks.uv_px[nadir].mean(axis=0) if nadir.any() else principal_point
+    centre = (float(centre_uv[0]), float(centre_uv[1]))
+    check_ruler_order(marks, centre)
+    if config.fit_tilt:
+        check_tilt_marks(marks, centre, int(problem.undirected.sum()))
+    if count_directions(marks, centre) < 2:
+        raise CalibrationError(
+            "marks: every mark lies on one radius from the nadir (one ruler); the lens is not known "
+            "around the image from it: lay the ruler in two or more directions", code="one_direction")
+    if fit_centre and direction_spread(marks, principal_point) < MIN_DIRECTION_SPREAD:
+        raise CalibrationError(
+            "principal_point: fitting the principal point or the aspect ratio needs rulers in at least "
+            "two directions that are not on one line", code="one_direction"
+        )
+
+
+def _fit_notes(fit: RulerFit, config: RulerFitConfig, pp_source: str, fit_pp: bool,
+               tilt_sigma_deg: tuple[float, float] | None) -> tuple[FitNote, ...]:
+    """What the user should know about a fit: where the centre came from, how far the marks reach,
+    what else the marks allow fitting, how well the tilt is known, and whether the constraint acted."""
+    marks, camera = fit.marks, fit.camera
+    notes = [FitNote("principal_point", f"principal point from {pp_source}" + (
+        ", then fitted" + (" with the tilt" if config.fit_tilt and not config.fit_principal_point else "")
+        if fit_pp else ""))]
+    reach = (f"marks reach {marks.distance_m.max():.2f} m (θ = {fit.theta_max_marked_deg:.1f}°); floor "
+             "positions farther out are extrapolated")
+    if fit.theta_max_marked_deg < _SHORT_REACH_DEG:
+        notes.append(FitNote("marks_short", f"{reach}: add marks farther out (θ ≥ {_SHORT_REACH_DEG:g}°) "
+                                            "before trusting positions there", "warning"))
+    else:
+        notes.append(FitNote("marks_reach", reach))
+    if not fit_pp and direction_spread(marks, camera.principal_point) >= MIN_DIRECTION_SPREAD:
+        notes.append(FitNote(
+            "principal_point_fittable",
+            "the rulers point in several directions: fitting the principal point from all marks "
+            "(--fit-principal-point) averages out the error of the single nadir click"))
+    if tilt_sigma_deg is not None and camera.tilt_deg is not None:
+        notes += _tilt_notes(camera.tilt_deg, tilt_sigma_deg)
+    directed = marks.is_nadir | marks.has_xy | (np.asarray(marks.ruler, dtype=object) != "")
+    if not config.fit_tilt and directed.all() and \
+            count_directions(marks, camera.principal_point) >= MIN_TILT_DIRECTIONS:
+        notes.append(FitNote(
+            "tilt_fittable", "the camera is taken to be level; with rulers in three or more directions "
+                             "the tilt can be fitted (--fit-tilt) and positions far out get better"))
+    if fit.monotonic_constrained:
+        notes.append(FitNote(
+            "monotonic_constraint",
+            f"r(θ) was held strictly increasing up to {config.theta_max_deg:g}° by the monotonicity "
+            "constraint (the unconstrained fit turns back); consider fewer coefficients or more marks "
+            "far out", "warning"))
+    return tuple(notes)
+
+
 def fit_ruler_calibration(
     marks: RulerMarks,
     altitude_m: float,
@@ -241,17 +298,9 @@ def fit_ruler_calibration(
         raise _options_error(
             f"principal_point {list(principal_point)} ({pp_source}) lies outside the image {width}x{height}"
         )
-    nadir = marks.is_nadir
-    centre = tuple(marks.uv_px[nadir].mean(axis=0)) if nadir.any() else principal_point
-    check_ruler_order(marks, (float(centre[0]), float(centre[1])))
-    if fit_tilt:
-        check_tilt_marks(marks, (float(centre[0]), float(centre[1])), int(problem.undirected.sum()))
-    spread = direction_spread(marks, principal_point)
-    if fit_centre and spread < MIN_DIRECTION_SPREAD:
-        raise CalibrationError(
-            "principal_point: fitting the principal point or the aspect ratio needs rulers in at least "
-            "two directions that are not on one line", code="one_direction"
-        )
+    _check_marks(marks, problem, config, principal_point, fit_centre)
+
+    # q = (u0, v0, log fy/fx, tilt a, tilt b, ruler directions): the nonlinear part (ruler_problem).
     directions = problem.initial_directions(principal_point[0], principal_point[1], config.aspect_ratio)
     q = np.concatenate([[principal_point[0], principal_point[1], math.log(config.aspect_ratio), 0.0, 0.0],
                         directions])
@@ -266,7 +315,6 @@ def fit_ruler_calibration(
     constrained = bool((problem.slope_rows @ unconstrained < slope_min).any())
     fx = float(c[0]) if config.focal_px is None else config.focal_px
     aspect = math.exp(q[2])
-    tilt = (float(q[3]), float(q[4]))
     camera = _fitted_camera({
         "id": camera_id,
         "altitude_m": float(altitude_m),
@@ -275,38 +323,14 @@ def fit_ruler_calibration(
         "focal_px": [fx, fx * aspect],
         "kb": (c / fx).tolist(),
         **({} if config.max_theta_deg is None else {"max_theta_deg": config.max_theta_deg}),
-        **({"tilt_deg": list(tilt)} if fit_tilt else {}),
+        **({"tilt_deg": [float(q[3]), float(q[4])]} if fit_tilt else {}),
     })
-    notes = [FitNote("principal_point", f"principal point from {pp_source}" + (
-        ", then fitted" + (" with the tilt" if fit_tilt and not config.fit_principal_point else "")
-        if fit_pp else ""))]
-    reach = (f"marks reach {marks.distance_m.max():.2f} m (θ = {math.degrees(theta_marked):.1f}°); floor "
-             "positions farther out are extrapolated")
-    if math.degrees(theta_marked) < _SHORT_REACH_DEG:
-        notes.append(FitNote("marks_short", f"{reach}: add marks farther out (θ ≥ {_SHORT_REACH_DEG:g}°) "
-                                            "before trusting positions there", "warning"))
-    else:
-        notes.append(FitNote("marks_reach", reach))
-    if not fit_pp and spread >= MIN_DIRECTION_SPREAD:
-        notes.append(FitNote(
-            "principal_point_fittable",
-            "the rulers point in several directions: fitting the principal point from all marks "
-            "(--fit-principal-point) averages out the error of the single nadir click"))
+    tilt_sigma_deg = None
     if fit_tilt:
         free_index = np.cumsum(free) - 1
-        rows = max(len(residual) - int(free.sum()) - n, 1)
-        noise_px = max(float(np.sqrt(residual @ residual / rows)), _CLICK_NOISE_PX)
+        dof = max(len(residual) - int(free.sum()) - n, 1)
+        noise_px = max(float(np.sqrt(residual @ residual / dof)), _CLICK_NOISE_PX)
         sigma = standard_errors(problem, q, free, slope_min, noise_px)
-        notes += _tilt_notes(tilt, (float(sigma[free_index[3]]), float(sigma[free_index[4]])))
-    elif count_directions(marks, principal_point) >= MIN_TILT_DIRECTIONS:
-        notes.append(FitNote(
-            "tilt_fittable", "the camera is taken to be level; with rulers in three or more directions "
-                             "the tilt can be fitted (--fit-tilt) and positions far out get better"))
-    if constrained:
-        notes.append(FitNote(
-            "monotonic_constraint",
-            f"r(θ) was held strictly increasing up to {config.theta_max_deg:g}° by the monotonicity "
-            "constraint (the unconstrained fit turns back); consider fewer coefficients or more marks "
-            "far out", "warning"))
-    return RulerFit(camera, marks, _residuals(camera, marks), math.degrees(theta_marked), constrained,
-                    tuple(notes))
+        tilt_sigma_deg = (float(sigma[free_index[3]]), float(sigma[free_index[4]]))
+    fit = RulerFit(camera, marks, _residuals(camera, marks), math.degrees(theta_marked), constrained)
+    return replace(fit, notes=_fit_notes(fit, config, pp_source, fit_pp, tilt_sigma_deg))

@@ -72,6 +72,13 @@ def test_tilt_needs_three_directions(directions: tuple[float, ...]) -> None:
     assert raised.value.code == "one_direction"
 
 
+def test_marks_on_one_radius_are_refused_even_without_the_tilt() -> None:
+    with pytest.raises(CalibrationError, match="one radius from the nadir") as raised:
+        fit(tape_marks((0.0, 0.0), directions_deg=(30.0,)))
+    assert raised.value.code == "one_direction"
+    assert fit(tape_marks((0.0, 0.0), directions_deg=(30.0, 210.0))).rms_m < 1e-9  # one line, two radii
+
+
 def test_tilt_needs_every_marks_direction() -> None:
     marks = tape_marks((2.0, -1.5))
     unlabelled = RulerMarks(marks.uv_px, marks.distance_m, marks.xy_m, ("",) * len(marks))
