@@ -41,6 +41,7 @@ from fisheye.ruler_problem import RadialProblem, levenberg_marquardt, standard_e
 FloatArray = NDArray[np.float64]
 
 MAX_COEFFICIENTS = 5
+MAX_FITTED_RULERS = 32  # each fitted ruler direction is a parameter: the fit's work grows with its square
 _MONOTONIC_SLOPE_FRACTION = 1e-3  # ε as a fraction of the marks' mean slope ρ/θ
 _CLICK_NOISE_PX = 0.5  # the least noise a hand-clicked mark has, for the tilt's uncertainty
 _MAX_TILT_SIGMA_DEG = 0.1  # a tilt known less well than this moves positions far out by centimetres
@@ -280,6 +281,11 @@ def fit_ruler_calibration(
     fit_pp = config.fit_principal_point or (fit_tilt and config.principal_point is None)
     fit_centre = fit_pp or config.fit_aspect_ratio
     problem = RadialProblem(marks, float(altitude_m), n, theta_max_rad, fit_centre or fit_tilt, fit_tilt)
+    if len(problem.rulers) > MAX_FITTED_RULERS:
+        raise CalibrationError(
+            f"ruler: the marks name {len(problem.rulers)} rulers, and each one's direction is fitted; "
+            f"at most {MAX_FITTED_RULERS} can be (give marks of one tape the same label)",
+            code="invalid_marks")
     theta_marked = float(problem.theta.max(initial=0.0))
     if theta_marked >= theta_max_rad:
         raise CalibrationError(

@@ -89,10 +89,13 @@ def direction_spread(marks: RulerMarks, centre_px: tuple[float, float]) -> float
 def count_directions(marks: RulerMarks, centre_px: tuple[float, float]) -> int:
     """How many distinct directions (at least 10° apart) the marks lie in, seen from the nadir."""
     angles = np.sort(np.mod(mark_directions_rad(marks, centre_px), 2 * math.pi))
-    if angles.size == 0:
-        return 0
-    gaps = np.diff(np.concatenate([angles, [angles[0] + 2 * math.pi]]))
-    return max(1, int((gaps > _DIRECTION_SEPARATION_RAD).sum()))
+    count, start = 0, -math.inf
+    for angle in angles:  # a direction starts where an angle passes the last start by 10°
+        if angle - start > _DIRECTION_SEPARATION_RAD:
+            count, start = count + 1, float(angle)
+    if count > 1 and angles[0] + 2 * math.pi - start <= _DIRECTION_SEPARATION_RAD:
+        count -= 1  # the last direction runs on into the first across 0°
+    return count
 
 
 def check_tilt_marks(marks: RulerMarks, centre_px: tuple[float, float], undirected: int) -> None:

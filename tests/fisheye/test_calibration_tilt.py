@@ -79,6 +79,16 @@ def test_marks_on_one_radius_are_refused_even_without_the_tilt() -> None:
     assert fit(tape_marks((0.0, 0.0), directions_deg=(30.0, 210.0))).rms_m < 1e-9  # one line, two radii
 
 
+def test_many_rulers_count_as_many_directions_up_to_the_limit() -> None:
+    fitted = fit(tape_marks((2.0, -1.5), directions_deg=tuple(np.arange(0.0, 360.0, 11.25)),
+                            distances_m=np.arange(1.0, 10.001, 1.0)), fit_tilt=True)
+    assert errors_at_m(fitted.camera, (2.0, -1.5), 8.0).max() < 1e-6
+    with pytest.raises(CalibrationError, match="at most 32 can be") as raised:
+        fit(tape_marks((2.0, -1.5), directions_deg=tuple(np.arange(0.0, 360.0, 9.0)),
+                       distances_m=np.arange(1.0, 10.001, 1.0)), fit_tilt=True)
+    assert raised.value.code == "invalid_marks"
+
+
 def test_tilt_needs_every_marks_direction() -> None:
     marks = tape_marks((2.0, -1.5))
     unlabelled = RulerMarks(marks.uv_px, marks.distance_m, marks.xy_m, ("",) * len(marks))
