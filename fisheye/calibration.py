@@ -310,14 +310,18 @@ def fit_ruler_calibration(
     directions = problem.initial_directions(principal_point[0], principal_point[1], config.aspect_ratio)
     q = np.concatenate([[principal_point[0], principal_point[1], math.log(config.aspect_ratio), 0.0, 0.0],
                         directions])
-    slope_min = _MONOTONIC_SLOPE_FRACTION * problem.mean_slope(q)
     free = np.concatenate([[fit_pp, fit_pp, config.fit_aspect_ratio, fit_tilt, fit_tilt],
                            np.ones(len(directions), dtype=bool)])
-    if free.any():
-        q = levenberg_marquardt(problem, q, free, slope_min)
-    c, residual = problem.solve(q, slope_min)
-    A, b = problem.rows(q)
-    unconstrained = np.linalg.lstsq(A, b, rcond=None)[0]
+    try:
+        slope_min = _MONOTONIC_SLOPE_FRACTION * problem.mean_slope(q)
+        if free.any():
+            q = levenberg_marquardt(problem, q, free, slope_min)
+        c, residual = problem.solve(q, slope_min)
+        A, b = problem.rows(q)
+        unconstrained = np.linalg.lstsq(A, b, rcond=None)[0]
+    except (ValueError, np.linalg.LinAlgError) as error:  # rank-deficient rows, infeasible constraints
+        raise CalibrationError(f"the marks do not determine a lens ({error}); check the marks, the "
+                               "altitude and the options", code="fit_failed") from None
     constrained = bool((problem.slope_rows @ unconstrained < slope_min).any())
     fx = float(c[0]) if config.focal_px is None else config.focal_px
     aspect = math.exp(q[2])

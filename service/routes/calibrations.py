@@ -163,8 +163,8 @@ def fit_to_json(request: FitRequest, fit: RulerFit) -> dict[str, Any]:
     description="The fitting of `fishloc calibrate --marks`, with the same options. Answers the fitted "
                 "camera file, every mark's residuals and notes (`code`, `level`, `message`); a refused "
                 "fit is a 422 whose `code` says why (too_few_marks, one_direction, nadir_mismatch, "
-                "not_monotonic, frame_size_mismatch, invalid_marks, invalid_options). Save the camera "
-                "with `PUT /v1/cameras/{id}`.",
+                "not_monotonic, frame_size_mismatch, fit_failed, invalid_marks, invalid_options). Save "
+                "the camera with `PUT /v1/cameras/{id}`.",
     openapi_extra={"requestBody": {"required": True, "content": {
         "application/json": {"schema": _inline_schema(FitRequest)}}}},
 )

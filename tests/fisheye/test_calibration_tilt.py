@@ -123,3 +123,12 @@ def test_bad_marks_are_refused_with_a_code(edit: Any, config: dict[str, Any], co
     with pytest.raises(CalibrationError, match=message) as raised:
         fit(marks, **config)
     assert raised.value.code == code
+
+
+def test_marks_that_leave_the_lens_undetermined_are_refused_not_crashed() -> None:
+    # Three marks and an aspect ratio of 1e-6: the monotonicity constraints have no common solution.
+    marks = RulerMarks.from_arrays([[11.0, 82.0], [74.0, 34.0], [48.0, 72.0]], [2.0, 0.0, 1.0],
+                                   ruler=["c", "c", "c"])
+    with pytest.raises(CalibrationError, match="do not determine a lens") as raised:
+        fit_ruler_calibration(marks, 3.2, (100, 100), "x", RulerFitConfig(coefficients=2, aspect_ratio=1e-6))
+    assert raised.value.code == "fit_failed"
