@@ -52,6 +52,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="principal point (px; default: the nadir mark)")
     parser.add_argument("--fit-principal-point", action="store_true",
                         help="refine the principal point from all marks (needs rulers in 2+ directions)")
+    parser.add_argument("--fit-tilt", action="store_true",
+                        help="fit the camera's tilt from straight down (needs rulers in 3+ directions; "
+                             "fits the principal point too unless --principal-point is given)")
     parser.add_argument("--max-theta-deg", type=float, metavar="DEG",
                         help="calibrated field: rays beyond this angle from the axis get no position")
 
@@ -95,6 +98,8 @@ def describe_camera(camera: FisheyeCamera) -> str:
         f"{camera.altitude_m:g} m, principal point ({camera.principal_point[0]:.2f}, "
         f"{camera.principal_point[1]:.2f}), focal ({camera.focal_px[0]:.2f}, {camera.focal_px[1]:.2f}) px, "
         f"kb [{kb}], field {camera.theta_max_deg:g}°"
+        + ("" if camera.is_level or camera.tilt_deg is None else
+           f", tilt [{camera.tilt_deg[0]:.3f}°, {camera.tilt_deg[1]:.3f}°]")
     )
 
 
@@ -109,12 +114,13 @@ def _from_marks(args: argparse.Namespace, camera_id: str) -> FisheyeCamera:
         principal_point=tuple(args.principal_point) if args.principal_point else None,
         fit_principal_point=args.fit_principal_point,
         max_theta_deg=args.max_theta_deg,
+        fit_tilt=args.fit_tilt,
     )
     marks = read_marks_csv(args.marks)
     fit = fit_ruler_calibration(marks, args.altitude, tuple(args.image_size), camera_id, config)
     print(residual_table(fit))
     for note in fit.notes:
-        print(f"note: {note}")
+        print(f"{'warning' if note.level == 'warning' else 'note'}: {note}")
     return fit.camera
 
 
