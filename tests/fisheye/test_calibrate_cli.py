@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from fisheye import camera_from_dict, load_camera
+from fisheye import camera_from_dict, camera_to_dict, load_camera
 from fisheye.ruler_marks import marks_to_csv, simulate_ruler_marks
 from service.cli import main
 
@@ -183,3 +183,19 @@ def test_fit_tilt_prints_the_tilt_and_warns_when_it_is_not_pinned_down(
     assert ", tilt [" in out
     assert ("warning: tilt fitted" in out) == warned and ("note: tilt fitted" in out) != warned
     assert load_camera(output).tilt_deg is not None
+
+
+def test_check_altitude_reports_the_fitted_beside_the_configured(marks_csv: Path, tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    wrong = tmp_path / "wrong.yaml"
+    wrong.write_text(json.dumps({**camera_to_dict(TRUE), "altitude_m": 3.0}), encoding="utf-8")
+    before = wrong.read_text(encoding="utf-8")
+    assert main(["calibrate", "--check-altitude", str(wrong), "--marks", str(marks_csv)]) == 0
+    out = capsys.readouterr().out
+    fitted = float(out.split("fitted ")[1].split(" m")[0])
+    assert "configured 3.000 m" in out and fitted == pytest.approx(3.2, abs=0.01)
+    assert wrong.read_text(encoding="utf-8") == before  # nothing written
+    assert main(["calibrate", "--check-altitude", str(wrong), "--opencv", str(marks_csv)]) == 2
+    assert "needs --marks" in capsys.readouterr().err
+    assert main(["calibrate", "--marks", str(marks_csv), "--image-size", "2952", "2952"]) == 2
+    assert "--altitude and -o/--output are required" in capsys.readouterr().err
