@@ -53,7 +53,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--kind", choices=KINDS, help="only indoor or only outdoor scenes")
     parser.add_argument("--style", type=_styles,
                         help=f"only scenes of these styles, comma-separated, in turn ({', '.join(STYLES)})")
-    parser.add_argument("--people", type=_people, help="people per frame as MIN-MAX (default 0-60 mix)")
+    parser.add_argument("--people", type=_people,
+                        help="people per frame as MIN-MAX (default 0-60 mix); with --sequence one number: "
+                             "people over the whole sequence (default 18 a minute, at least 10)")
     parser.add_argument("--images-per-scene", type=int, default=4, help="frames rendered per scene")
     parser.add_argument("--jpeg-quality", type=int, help="fixed JPEG quality (default: random 70-95)")
     parser.add_argument("--workers", type=int, default=default_workers(),
