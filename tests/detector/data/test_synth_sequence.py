@@ -159,5 +159,9 @@ def test_the_command_writes_a_sequence(tmp_path: Path, capsys: pytest.CaptureFix
                  "--seed", "2", "--workers", "2", "--quiet"]) == 0
     assert "2 steps x 2 cameras = 4 frames" in capsys.readouterr().out
     assert sorted(p.name for p in (out / "hall-west").iterdir()) == ["000001.jpg", "000002.jpg"]
+    assert main(["synth", "--sequence", "--out", str(tmp_path / "few"), "--seconds", "0.2", "--size", "32",
+                 "--people", "4", "--workers", "1", "--quiet"]) == 0
+    assert json.loads((tmp_path / "few" / "annotations.json").read_text())["info"]["people"] == 4
+    assert main(["synth", "--sequence", "--out", str(out), "--people", "3-5"]) == 2
     assert main(["synth", "--sequence", "--images", "3", "--out", str(out)]) == 2
     assert main(["synth", "--sequence", "--out", str(out), "--fps", "0"]) == 2
