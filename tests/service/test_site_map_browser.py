@@ -130,3 +130,26 @@ def test_the_viewer_links_the_map_and_a_server_without_sites_says_so(
         status = driver.execute_script("return document.getElementById('status').textContent")
         assert "No site yet" in status
         assert console_errors(driver) == []
+
+
+def test_a_guarded_site_asks_for_the_read_token_and_then_follows(
+        driver: Any, settings_for: Callable[..., Settings], sequence: Sequence) -> None:
+    with LiveServer(settings_for(read_token="let-me-see", api_token="let-me-write")) as guarded:
+        client = ServerClient(guarded.url, token="let-me-write")
+        try:
+            install(client, sequence)
+            driver.get(f"{guarded.url}/site")
+            wait_for(lambda: map_state(driver)["state"] == "token", "the page to ask for the read token")
+            assert driver.execute_script("return document.getElementById('token-field').hidden") is False
+            field = driver.find_element("id", "read-token")
+            field.send_keys("let-me-see")
+            driver.execute_script("arguments[0].dispatchEvent(new Event('change'))", field)
+            wait_for(lambda: map_state(driver)["state"] == "live", "the page to follow the guarded site")
+            post_steps(client, sequence, range(2))
+        finally:
+            client.close()
+        last = sequence.steps[1].capture_time
+        wait_for(lambda: map_state(driver)["time"] == last, "the events of the guarded site")
+        driver.execute_script("sessionStorage.clear()")
+        errors = console_errors(driver)  # only the refused first look, before the token
+        assert all("/v1/sites - Failed to load resource" in e and "401" in e for e in errors)

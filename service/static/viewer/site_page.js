@@ -18,8 +18,13 @@ const state = {
 };
 window.fishlocSite = { state };
 
+// With FISHLOC_READ_TOKEN set, site reads and events need it: asked for on a 401, kept for the tab.
+const TOKEN_KEY = "fishloc-read-token";
+const readToken = () => sessionStorage.getItem(TOKEN_KEY) || "";
+
 async function getJson(path) {
-  const response = await fetch(path, { cache: "no-store" });
+  const headers = readToken() ? { Authorization: `Bearer ${readToken()}` } : {};
+  const response = await fetch(path, { cache: "no-store", headers });
   if (!response.ok) {
     let body = null;
     try {
@@ -122,7 +127,8 @@ function setLive(live) {
 
 function follow(siteId) {
   state.source?.close();
-  const source = new EventSource(`/v1/sites/${encodeURIComponent(siteId)}/events`);
+  const query = readToken() ? `?${new URLSearchParams({ access_token: readToken() })}` : "";
+  const source = new EventSource(`/v1/sites/${encodeURIComponent(siteId)}/events${query}`);
   state.source = source;
   const onEvent = (event) => {
     state.updates += 1;
@@ -179,11 +185,17 @@ async function route() {
 }
 
 async function main() {
+  $("read-token").addEventListener("change", () => {
+    sessionStorage.setItem(TOKEN_KEY, $("read-token").value);
+    location.reload();
+  });
   try {
     state.sites = (await getJson("/v1/sites")).sites;
   } catch (error) {
-    document.body.dataset.state = "error";
-    setStatus(`cannot list the sites: ${error.message}`, true);
+    document.body.dataset.state = error.status === 401 ? "token" : "error";
+    $("token-field").hidden = error.status !== 401;
+    setStatus(error.status === 401 ? "This service guards where people are: enter its read token."
+      : `cannot list the sites: ${error.message}`, true);
     return;
   }
   renderSiteList();
