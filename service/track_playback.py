@@ -106,8 +106,11 @@ def play_through_server(client: ServerClient, sequence: Sequence,
     for index, step in enumerate(sequence.steps):
         for frame in step.frames:
             query = urllib.parse.urlencode({"capture_time": repr(step.capture_time), "frame_id": str(index)})
-            client.request("POST", f"/v1/cameras/{_quoted(frame.camera_id)}/detect?{query}",
-                           frame.path.read_bytes(), "image/jpeg")
+            _, answer = client.request("POST", f"/v1/cameras/{_quoted(frame.camera_id)}/detect?{query}",
+                                       frame.path.read_bytes(), "image/jpeg")
+            reported.detections.append((index, frame.camera_id, [
+                (float(d["site_position_m"][0]), float(d["site_position_m"][1]))
+                for d in answer["detections"] if d.get("site_position_m") is not None]))
         _, occupancy = client.request("GET", occupancy_path)
         reported.add(occupancy)
         if on_step is not None:

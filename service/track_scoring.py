@@ -13,6 +13,7 @@ every camera (and within the gate) is left out of that step: it is neither right
 - Line counts: the reported `lines[l]` (`in`, `out`) after the last step, less those before the
   first, against the crossings of the true paths from step to step, by DESIGN.md's convention (from
   the line's left to its right, looking from `from_m` to `to_m` with y up, is `in`).
+- `detections` (played through a server): what the detector fed the tracker, frame by frame.
 """
 
 from __future__ import annotations
@@ -36,6 +37,8 @@ class Reported:
     site's `times` per step, and the line tallies before the first step and after the last."""
 
     times: list[float | None] = field(default_factory=list)
+    # Each frame's detections as the service answered them: (step index, camera id, site positions).
+    detections: list[tuple[int, str, list[tuple[float, float]]]] = field(default_factory=list)
     people: list[dict[str, tuple[float, float]]] = field(default_factory=list)
     zone_counts: list[dict[str, int]] = field(default_factory=list)
     lines_before: dict[str, dict[str, int]] = field(default_factory=dict)
@@ -212,7 +215,49 @@ def _duplicates(events: Any, frame: int, truth_ids: list[int], truth_xy: FloatAr
                if h in false_ids and np.linalg.norm(taken - xy, axis=1).min() <= gate_m)
 
 
+def score_detections(sequence: Sequence, reported: Reported, gate_m: float = GATE_M
+                     ) -> dict[str, Any] | None:
+    """What the detector fed the tracker, frame by frame (None when it was not recorded): each
+    frame's detections matched one to one to the people it shows fairly (within the gate), the
+    unmatched ones near such a person (a second detection of one person) or elsewhere, and how far
+    apart the cameras of one step place the same person."""
+    from scipy.optimize import linear_sum_assignment  # evaluation only, like motmetrics
+
+    if not reported.detections:
+        return None
+    frames = {(k, f.camera_id): f for k, step in enumerate(sequence.steps) for f in step.frames}
+    matched = missed = near = elsewhere = 0
+    placed: dict[tuple[int, int], list[FloatArray]] = {}
+    for step, camera_id, positions in reported.detections:
+        people = [p for p in frames[(step, camera_id)].people if not p.ignore]
+        found = np.array(positions, dtype=np.float64).reshape(-1, 2)
+        truth = np.array([p.site_xy_m for p in people], dtype=np.float64).reshape(-1, 2)
+        gaps = np.linalg.norm(found[:, None] - truth[None], axis=2)
+        rows, cols = linear_sum_assignment(np.where(gaps <= gate_m, gaps, 1e6)) if gaps.size else ([], [])
+        pairs = [(r, c) for r, c in zip(rows, cols, strict=True) if gaps[r, c] <= gate_m]
+        matched += len(pairs)
+        missed += len(truth) - len(pairs)
+        used = {r for r, _ in pairs}
+        for r in range(len(found)):
+            if r not in used:
+                near_someone = bool(len(truth)) and float(gaps[r].min()) <= gate_m
+                near, elsewhere = near + near_someone, elsewhere + (not near_someone)
+        for r, c in pairs:
+            placed.setdefault((step, people[c].track_id), []).append(found[r])
+    spread = [float(np.linalg.norm(np.ptp(np.array(p), axis=0))) for p in placed.values() if len(p) > 1]
+    count = len(reported.detections)
+    return {
+        "frames": count,
+        "precision": matched / max(matched + near + elsewhere, 1),
+        "recall": matched / max(matched + missed, 1),
+        "extra_near_a_person_per_frame": near / count, "elsewhere_per_frame": elsewhere / count,
+        "camera_spread_m": None if not spread else {
+            "p50": float(np.percentile(spread, 50)), "p90": float(np.percentile(spread, 90)),
+            "max": float(np.max(spread)), "people_steps": len(spread)},
+    }
+
+
 def score_sequence(sequence: Sequence, reported: Reported, gate_m: float = GATE_M) -> dict[str, Any]:
-    """Every figure of the module docstring."""
+    """Every figure of the module docstring, and `detections` (`score_detections`)."""
     return {**score_tracks(sequence, reported, gate_m), **score_zones(sequence, reported),
-            **score_lines(sequence, reported)}
+            **score_lines(sequence, reported), "detections": score_detections(sequence, reported, gate_m)}

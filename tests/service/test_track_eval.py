@@ -48,6 +48,7 @@ def test_the_tracker_alone_follows_the_true_positions(sequence_file: Path, tmp_p
     # track (before it is confirmed) are missed.
     assert (figures["false_positives"], figures["duplicates"], figures["id_switches"]) == (0, 0, 0)
     assert figures["mota"] > 0.75 and figures["idf1"] > 0.85
+    assert figures["detections"] is None  # no detector ran
     for line in figures["lines"].values():
         assert all(line[d]["reported"] == line[d]["true"] for d in ("in", "out"))
 
@@ -83,6 +84,10 @@ def test_the_command_against_a_server_and_in_process_agree(sequence_file: Path, 
     same = ("mota", "idf1", "id_switches", "duplicates", "false_positives", "misses", "zones", "lines")
     assert {k: a[k] for k in same} == {k: b[k] for k in same}
     assert a["recall"] > 0.5 and 0 <= a["duplicate_rate"] <= 1
+    # What the detector fed the tracker: every frame, most people found, cameras agreeing roughly.
+    detections = a["detections"]
+    assert detections == b["detections"] and detections["frames"] == 2 * STEPS
+    assert detections["recall"] > 0.5 and detections["camera_spread_m"]["p50"] < 0.75
 
 
 def test_bad_arguments_and_files_are_refused(sequence_file: Path, tmp_path: Path) -> None:

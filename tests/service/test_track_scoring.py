@@ -7,11 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from service.sequence_data import Sequence, SequenceStep
+from service.sequence_data import Sequence, SequenceFrame, SequencePerson, SequenceStep
 from service.track_scoring import (
     Reported,
     inside_polygon,
     line_crossings,
+    score_detections,
     score_sequence,
     true_line_counts,
 )
@@ -129,3 +130,22 @@ def test_the_report_must_cover_every_step(tmp_path: Path) -> None:
     sequence = _sequence({1: WALK_IN})
     with pytest.raises(ValueError, match="5 occupancy answers for 6 steps"):
         score_sequence(sequence, _reported([{}] * 5, _sequence({1: WALK_IN[:5]})))
+
+
+def test_detections_per_frame_count_second_detections_and_camera_spread() -> None:
+    person = SequencePerson(1, (1.0, 0.0), 2.0, False)
+    hidden = SequencePerson(2, (4.0, 0.0), 2.0, True)
+    frames = [SequenceFrame("a", Path("a.jpg"), [person, hidden]),
+              SequenceFrame("b", Path("b.jpg"), [person])]
+    sequence = Sequence("s", [], {}, {}, [SequenceStep(1000.0, frames, {1: (1.0, 0.0), 2: (4.0, 0.0)},
+                                                      frozenset({1}))])
+    reported = Reported(detections=[
+        (0, "a", [(1.1, 0.0), (1.4, 0.2), (4.0, 0.0), (9.0, 9.0)]),  # found, again, a hidden one, nobody
+        (0, "b", [(0.8, 0.1)]),
+    ])
+    figures = score_detections(sequence, reported)
+    assert figures is not None
+    assert (figures["frames"], figures["recall"], figures["precision"]) == (2, 1.0, 2 / 5)
+    assert figures["extra_near_a_person_per_frame"] == 0.5 and figures["elsewhere_per_frame"] == 1.0
+    assert figures["camera_spread_m"]["max"] == pytest.approx(np.hypot(0.3, 0.1))
+    assert score_detections(sequence, Reported()) is None
