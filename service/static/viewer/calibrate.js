@@ -1,0 +1,561 @@
+// The Calibrate mode of one camera (#/calibrate/<id>): on its latest or an uploaded frame, click the
+// nadir and marks along tapes laid on the floor, see the fit of POST /v1/calibrations/fit after every
+// change (residual of each mark, fitted rings and tape directions, RMS, the fitter's notes), draw
+// masks, and save the camera with PUT /v1/cameras/{id}: nothing is written before Save. The Check
+// tool then gives the floor position of any clicked pixel by the saved calibration.
+//
+// Marks and masks are kept in frame pixels; the fit, marks.csv and `masks_px` use the image size
+// (u' = (u + 0.5)·s − 0.5 when the frame has another resolution of the same aspect ratio).
+
+import { api } from "./api.js";
+import { calibrateOverlay } from "./calibrate_overlay.js";
+import { fmt, fmtPair, html, svg } from "./dom.js";
+import { pixelToFloorPoint, scaledCamera } from "./geometry.js";
+import { marksToCsv, parseMarksCsv } from "./marks_csv.js";
+import { maskProblem, rescalePoints } from "./masks.js";
+import { attachZoomPan } from "./zoom_pan.js";
+
+const $ = (id) => document.getElementById(id);
+const CLOSE_MASK_PX = 10; // a click this near (screen px) the first corner closes the mask
+const MAX_CHECKS = 8;
+
+const HINTS = {
+  nadir: "Click the point straight below the lens (the tapes' zero); click again to move it.",
+  mark: "Click a mark on a tape: it gets the ruler and distance of 'Next mark', then the distance moves on by the step. " +
+        "Drag a mark to move it, click one to select it (Delete removes it), edit it in the table.",
+  mask: "Click the corners of a mirror, poster, screen or window; click the first corner or press Enter to close it, " +
+        "Escape to drop it.",
+  check: "Click a floor point: its position and distance from the nadir by the saved calibration.",
+};
+
+export const calibrateState = {
+  cameraId: null,
+  camera: null,        // the saved record
+  frame: null,         // {url, width, height, source}
+  marks: [],           // [{id, ruler, u, v, distance_m, x_m, y_m}] frame px
+  masks: [],           // [[[u, v], ...]] frame px
+  drawing: [],         // the mask being drawn
+  checks: [],          // [{u, v, xy}]
+  selected: null,      // id of the selected mark
+  nextId: 1,
+  fit: null,           // the fit answer
+  fitIds: [],          // ids of the marks that fit was made from, in order
+  fitError: null,
+  fitsWanted: 0,
+  fitsDone: 0,
+  fitting: false,
+  unsaved: false,
+  saves: 0,
+  renders: 0,
+};
+const cal = calibrateState;
+let zoom = null;
+let report = () => {};
+
+// ----- sizes
+
+function frameWh() {
+  return [cal.frame.width, cal.frame.height];
+}
+
+/** The image size of the fit as entered, or an Error saying what is wrong with it. */
+function imageWh() {
+  const size = [Number($("cal-width").value), Number($("cal-height").value)];
+  if (!size.every((n) => Number.isInteger(n) && n >= 2)) return new Error("enter the image size (whole pixels, 2 or more)");
+  if (cal.frame && Math.abs(size[0] * cal.frame.height - size[1] * cal.frame.width) > Math.max(...size)) {
+    return new Error(`the frame is ${cal.frame.width}×${cal.frame.height} px but the image size is ${size[0]}×${size[1]} px, ` +
+                     "another aspect ratio: the marks cannot be carried over; take a frame of this camera or enter its size");
+  }
+  return size;
+}
+
+// ----- fitting
+
+function fitRequest() {
+  if (!cal.frame) return new Error("no frame yet: press Latest frame or upload one");
+  if (!cal.marks.length) return new Error("no marks yet: click the nadir, then marks along a tape");
+  const size = imageWh();
+  if (size instanceof Error) return size;
+  const altitude = Number($("cal-altitude").value);
+  if (!(altitude > 0)) return new Error("enter the altitude of the lens above the floor (m, > 0)");
+  const uv = rescalePoints(cal.marks.map((m) => [m.u, m.v]), frameWh(), size);
+  return {
+    altitude_m: altitude,
+    image_size: size,
+    marks: cal.marks.map((m, i) => ({
+      ruler: m.ruler, u: uv[i][0], v: uv[i][1], distance_m: m.distance_m,
+      ...(m.x_m !== null ? { x_m: m.x_m, y_m: m.y_m } : {}),
+    })),
+    options: {
+      coefficients: Number($("cal-coefficients").value),
+      fit_principal_point: $("cal-fit-pp").checked,
+      fit_tilt: $("cal-fit-tilt").checked,
+    },
+  };
+}
+
+async function fitOnce() {
+  const body = fitRequest();
+  const ids = cal.marks.map((m) => m.id);
+  if (body instanceof Error) {
+    Object.assign(cal, { fit: null, fitIds: [], fitError: body.message });
+    return;
+  }
+  try {
+    const answer = await api.fitCalibration(body, $("cal-token").value.trim());
+    Object.assign(cal, { fit: answer, fitIds: ids, fitError: null });
+  } catch (error) {
+    Object.assign(cal, { fit: null, fitIds: [], fitError: error.message });
+  }
+}
+
+/** Fit again after a change; one request at a time, the last change always fitted. */
+async function refit() {
+  cal.fitsWanted += 1;
+  cal.unsaved = true;
+  render();
+  if (cal.fitting) return;
+  cal.fitting = true;
+  try {
+    while (cal.fitsDone < cal.fitsWanted) {
+      const wanted = cal.fitsWanted;
+      await fitOnce();
+      cal.fitsDone = wanted;
+    }
+  } finally {
+    cal.fitting = false;
+  }
+  render();
+}
+
+function residuals() {
+  const byId = new Map();
+  if (cal.fit) cal.fitIds.forEach((id, i) => byId.set(id, cal.fit.marks[i]));
+  return byId;
+}
+
+/** The camera drawn over the frame: the fit, else the saved calibration; scaled to the frame. */
+function shownCamera() {
+  const camera = cal.fit ? cal.fit.camera : cal.camera;
+  try {
+    return camera && cal.frame ? scaledCamera(camera, frameWh()) : null;
+  } catch {
+    return null;
+  }
+}
+
+// ----- drawing
+
+function renderFrame() {
+  const root = $("cal-frame");
+  const overlay = root.querySelector("g.overlay");
+  if (!cal.frame) {
+    root.replaceChildren();
+    return;
+  }
+  const next = calibrateOverlay({
+    camera: shownCamera(), frameWh: frameWh(), showRings: $("cal-rings").checked, marks: cal.marks,
+    residuals: residuals(), selected: cal.selected, masks: cal.masks, drawing: cal.drawing, checks: cal.checks,
+    screenPerFrame: zoom.view().screenPerFrame,
+  });
+  if (overlay) overlay.replaceWith(next);
+  else root.append(next);
+}
+
+function numberCell(mark, field, digits) {
+  const value = mark[field];
+  return html("td", {}, [html("input", {
+    type: "number", step: "any", "data-mark-id": mark.id, "data-field": field, size: 6,
+    value: value === null ? "" : +value.toFixed(digits),
+  })]);
+}
+
+function renderMarksTable() {
+  const active = document.activeElement;
+  // A value being typed survives the redraw that a finished fit brings.
+  const focused = active?.dataset?.field && $("cal-marks").contains(active)
+    ? { ...active.dataset, value: active.value } : null;
+  const byId = residuals();
+  const rows = cal.marks.map((mark, index) => {
+    const residual = byId.get(mark.id);
+    return html("tr", { "data-mark-id": mark.id, class: mark.id === cal.selected ? "selected" : null }, [
+      html("td", { text: mark.distance_m === 0 ? `${index + 1} nadir` : index + 1 }),
+      html("td", {}, [html("input", { "data-mark-id": mark.id, "data-field": "ruler", value: mark.ruler, size: 6 })]),
+      numberCell(mark, "distance_m", 4), numberCell(mark, "x_m", 4), numberCell(mark, "y_m", 4),
+      html("td", { text: fmtPair([mark.u, mark.v], 1) }),
+      html("td", { class: "err-m", text: residual && residual.err_m !== null ? fmt(residual.err_m * 100, 1) : "–" }),
+      html("td", { class: "err-px", text: residual && residual.err_px !== null ? fmt(residual.err_px, 2) : "–" }),
+      html("td", {}, [html("button", { type: "button", class: "delete", "data-mark-id": mark.id, title: "delete", text: "✕" })]),
+    ]);
+  });
+  $("cal-marks").querySelector("tbody").replaceChildren(...rows);
+  const again = focused && $("cal-marks").querySelector(`input[data-mark-id="${focused.markId}"][data-field="${focused.field}"]`);
+  if (again) {
+    again.value = focused.value;
+    again.focus();
+  }
+}
+
+function renderMasks() {
+  const items = cal.masks.map((points, index) => {
+    const problem = maskProblem(points, index);
+    return html("li", { "data-mask": index, class: problem ? "error" : null }, [
+      problem ?? `mask ${index + 1}: ${points.length} corners`, " ",
+      html("button", { type: "button", class: "delete", "data-mask": index, text: "✕" }),
+    ]);
+  });
+  if (cal.drawing.length) items.push(html("li", { class: "muted", text: `drawing: ${cal.drawing.length} corners` }));
+  $("cal-masks").replaceChildren(...items);
+}
+
+function renderResult() {
+  const fit = cal.fit;
+  $("cal-rms").textContent = fit
+    ? `RMS ${fmt(fit.rms_m * 100, 2)} cm, ${fmt(fit.rms_px, 2)} px over ${fit.marks.length} marks` +
+      (cal.fitting ? " (fitting…)" : "")
+    : (cal.fitting ? "fitting…" : "");
+  $("cal-error").textContent = cal.fitError ?? "";
+  // A note is {code, level, message} (or a plain message): warnings say what to add or change.
+  const notes = (fit ? fit.notes : []).map((note) => (typeof note === "string" ? { message: note } : note));
+  $("cal-notes").replaceChildren(...notes.map((note) => html("li", {
+    class: note.level === "warning" ? "warning" : null, "data-code": note.code ?? null, text: note.message,
+  })));
+  const size = imageWh();
+  const sizeNote = cal.frame && !(size instanceof Error) && (size[0] !== cal.frame.width || size[1] !== cal.frame.height)
+    ? ` · marks scaled to ${size[0]}×${size[1]} px` : "";
+  $("cal-frame-info").textContent = cal.frame
+    ? `${cal.frame.source}: ${cal.frame.width}×${cal.frame.height} px${sizeNote} · wheel: zoom at the pointer · ` +
+      "drag: pan, or move a mark · click: the tool"
+    : "no frame yet";
+  $("cal-saved").textContent = cal.unsaved ? "not saved: the registry still has the previous calibration" : "saved";
+}
+
+function render() {
+  renderFrame();
+  renderMarksTable();
+  renderMasks();
+  renderResult();
+  cal.renders += 1;
+  document.body.dataset.calibrate = `${cal.cameraId}:${cal.fitsDone}/${cal.fitsWanted}${cal.fitting ? ":fitting" : ""}`;
+}
+
+// ----- frames
+
+async function loadFrame(blob, source) {
+  const url = URL.createObjectURL(blob);
+  const image = new Image();
+  image.src = url;
+  await image.decode();
+  const [width, height] = [image.naturalWidth, image.naturalHeight];
+  const old = cal.frame;
+  if (old) URL.revokeObjectURL(old.url);
+  // Marks and masks stay on the floor they were put on: carried to the new frame's pixels.
+  const carry = (points) => (old ? rescalePoints(points, [old.width, old.height], [width, height]) : points);
+  cal.marks = cal.marks.map((m) => {
+    const [[u, v]] = carry([[m.u, m.v]]);
+    return { ...m, u, v };
+  });
+  cal.masks = old ? cal.masks.map(carry) : savedMasks([width, height]);
+  cal.frame = { url, width, height, source };
+  cal.checks = [];
+  const root = $("cal-frame");
+  root.replaceChildren(svg("image", { href: url, x: -0.5, y: -0.5, width, height, preserveAspectRatio: "none" }));
+  zoom.setFrame(width, height);
+  await refit();
+}
+
+/** The saved camera's masks in pixels of a frame `wh` ([] when it has none or another aspect ratio). */
+function savedMasks(wh) {
+  const masks = cal.camera?.masks_px ?? [];
+  const [w, h] = cal.camera?.image_size ?? wh;
+  if (Math.abs(w * wh[1] - h * wh[0]) > Math.max(w, h)) return [];
+  return masks.map((points) => rescalePoints(points, [w, h], wh));
+}
+
+async function loadLatest() {
+  const record = await api.latest(cal.cameraId);
+  if (record === null) throw new Error(`camera ${cal.cameraId} has had no frame since the service started: upload one`);
+  const blob = await api.latestJpeg(cal.cameraId, record.sequence);
+  if (blob === null) return loadLatest();
+  await loadFrame(blob, `latest frame #${record.sequence}`);
+  return record.sequence;
+}
+
+// ----- editing
+
+function markById(id) {
+  return cal.marks.find((m) => m.id === Number(id)) ?? null;
+}
+
+function addMark(u, v) {
+  const distance = Number($("cal-distance").value);
+  if (!(distance > 0)) throw new Error("enter the distance of the next mark (m, > 0); the nadir tool sets distance 0");
+  const mark = { id: cal.nextId++, ruler: $("cal-ruler").value.trim(), u, v, distance_m: distance, x_m: null, y_m: null };
+  cal.marks.push(mark);
+  cal.selected = mark.id;
+  const step = Number($("cal-step").value);
+  if (step > 0) $("cal-distance").value = String(+(distance + step).toFixed(6));
+  return refit();
+}
+
+function setNadir(u, v) {
+  const nadir = cal.marks.find((m) => m.distance_m === 0);
+  if (nadir) Object.assign(nadir, { u, v });
+  else cal.marks.unshift({ id: cal.nextId++, ruler: "nadir", u, v, distance_m: 0, x_m: null, y_m: null });
+  cal.selected = (nadir ?? cal.marks[0]).id;
+  return refit();
+}
+
+function deleteMark(id) {
+  cal.marks = cal.marks.filter((m) => m.id !== Number(id));
+  if (cal.selected === Number(id)) cal.selected = null;
+  return refit();
+}
+
+/** A typed change to a mark's ruler, distance or floor position; a bad value is refused, with why. */
+function editMark(id, field, text) {
+  const mark = markById(id);
+  if (!mark) return;
+  if (field === "ruler") {
+    mark.ruler = text.trim();
+    return refit();
+  }
+  const value = text.trim() === "" ? null : Number(text);
+  if (value !== null && !Number.isFinite(value)) throw new Error(`${field} must be a number`);
+  if (field === "distance_m") {
+    if (value === null || value < 0) {
+      render();
+      throw new Error(`mark ${cal.marks.indexOf(mark) + 1}: the distance must be a number ≥ 0 (m)`);
+    }
+    mark.distance_m = value;
+  } else {
+    mark[field] = value;
+    const other = field === "x_m" ? "y_m" : "x_m";
+    // A floor position needs both coordinates; the distance follows it once it has them.
+    if (value !== null && mark[other] === null) mark[other] = 0;
+    if (value === null) mark[other] = null;
+    if (mark.x_m !== null) mark.distance_m = Math.hypot(mark.x_m, mark.y_m);
+  }
+  return refit();
+}
+
+function closeMask() {
+  if (cal.drawing.length < 3) throw new Error("a mask needs 3 or more corners");
+  cal.masks.push(cal.drawing);
+  cal.drawing = [];
+  cal.unsaved = true;
+  render();
+}
+
+function addMaskCorner(u, v) {
+  const first = cal.drawing[0];
+  if (first && cal.drawing.length >= 3) {
+    const [a, b] = [zoom.toClient(...first), zoom.toClient(u, v)];
+    if (Math.hypot(a[0] - b[0], a[1] - b[1]) <= CLOSE_MASK_PX) return closeMask();
+  }
+  cal.drawing.push([u, v]);
+  render();
+}
+
+function check(u, v) {
+  if (!cal.camera) throw new Error(`camera ${cal.cameraId} is not in the registry`);
+  const xy = pixelToFloorPoint(scaledCamera(cal.camera, frameWh()), u, v);
+  cal.checks = [...cal.checks, { u, v, xy }].slice(-MAX_CHECKS);
+  $("cal-check").textContent = xy
+    ? `pixel (${fmt(u, 1)}, ${fmt(v, 1)}): floor (${fmt(xy[0], 3)}, ${fmt(xy[1], 3)}) m, ` +
+      `${fmt(Math.hypot(...xy), 3)} m from the nadir (saved calibration)`
+    : `pixel (${fmt(u, 1)}, ${fmt(v, 1)}) has no floor point (beyond the calibrated field or the horizon)`;
+  $("cal-check").dataset.xy = xy ? JSON.stringify(xy) : "null";
+  render();
+}
+
+function tool() {
+  return document.querySelector('input[name="cal-tool"]:checked').value;
+}
+
+function onFrameClick(u, v, element) {
+  if (!cal.frame) return;
+  const mode = tool();
+  if (mode === "mask") return addMaskCorner(u, v);
+  if (mode === "check") return check(u, v);
+  if (element?.dataset.markId) { // a click on a mark selects it
+    cal.selected = Number(element.dataset.markId);
+    return render();
+  }
+  return mode === "nadir" ? setNadir(u, v) : addMark(u, v);
+}
+
+// ----- import, export, save
+
+async function importCsv(file) {
+  if (!cal.frame) throw new Error("load the frame the marks were taken on first");
+  const size = imageWh();
+  if (size instanceof Error) throw size;
+  const marks = parseMarksCsv(await file.text(), file.name);
+  const uv = rescalePoints(marks.map((m) => [m.u, m.v]), size, frameWh());
+  cal.marks = marks.map((m, i) => ({ ...m, id: cal.nextId + i, u: uv[i][0], v: uv[i][1] }));
+  cal.nextId += marks.length;
+  cal.selected = null;
+  report(`${file.name}: ${marks.length} marks`);
+  await refit();
+}
+
+/** The marks.csv text of the marks, in pixels of the image size. */
+function exportCsv() {
+  const size = imageWh();
+  if (size instanceof Error) throw size;
+  const uv = rescalePoints(cal.marks.map((m) => [m.u, m.v]), frameWh(), size);
+  return marksToCsv(cal.marks.map((m, i) => ({ ...m, u: uv[i][0], v: uv[i][1] })));
+}
+
+function download() {
+  const text = exportCsv();
+  const link = html("a", { href: URL.createObjectURL(new Blob([text], { type: "text/csv" })), download: `${cal.cameraId}-marks.csv` });
+  cal.exported = text;
+  link.click();
+  setTimeout(() => URL.revokeObjectURL(link.href), 0);
+}
+
+/** The record Save writes: the fitted lens (or the saved one), the camera's site and pose, the masks. */
+function recordToSave() {
+  if (cal.marks.length && !cal.fit) {
+    throw new Error(`the marks give no calibration yet (${cal.fitError ?? "fitting"}); fix them, or delete them to save the masks alone`);
+  }
+  if (cal.fitting || cal.fitsDone < cal.fitsWanted) throw new Error("the fit is not finished yet");
+  const base = cal.fit ? cal.fit.camera : cal.camera;
+  if (!base) throw new Error(`camera ${cal.cameraId} is not in the registry and has no fit`);
+  const keep = Object.fromEntries(["site", "site_pose"].filter((k) => cal.camera?.[k] != null).map((k) => [k, cal.camera[k]]));
+  const masks = cal.frame ? cal.masks.map((points) => rescalePoints(points, frameWh(), base.image_size)) : (cal.camera?.masks_px ?? []);
+  return { ...base, ...keep, id: cal.cameraId, masks_px: masks };
+}
+
+async function save() {
+  if (cal.drawing.length) throw new Error("close or drop the mask being drawn first (Enter or Escape)");
+  const saved = await api.putCamera(cal.cameraId, recordToSave(), $("cal-token").value.trim());
+  cal.camera = saved;
+  cal.unsaved = false;
+  cal.saves += 1;
+  report(`saved camera ${saved.id}; the Check tool now uses it`);
+  render();
+}
+
+// ----- wiring
+
+function guarded(action) {
+  return (...args) => Promise.resolve().then(() => action(...args)).catch((error) => {
+    report(error.message, true);
+    render();
+  });
+}
+
+let wired = false;
+
+function wire() {
+  zoom = attachZoomPan($("cal-frame"), {
+    click: guarded((u, v, _event, element) => onFrameClick(u, v, element)),
+    dragStart: (element) => {
+      if (!element.dataset.markId || !["nadir", "mark"].includes(tool())) return false;
+      cal.selected = Number(element.dataset.markId);
+      return true;
+    },
+    drag: (u, v) => {
+      Object.assign(markById(cal.selected), { u, v });
+      renderFrame();
+    },
+    dragEnd: guarded((u, v) => {
+      Object.assign(markById(cal.selected), { u, v });
+      return refit();
+    }),
+    view: () => cal.frame && renderFrame(),
+  });
+  $("cal-upload").addEventListener("change", guarded(async (event) => {
+    const [file] = event.target.files;
+    event.target.value = "";
+    if (file) await loadFrame(file, `uploaded ${file.name}`);
+  }));
+  $("cal-latest").addEventListener("click", guarded(loadLatest));
+  $("cal-whole").addEventListener("click", () => zoom.whole());
+  $("cal-one").addEventListener("click", () => zoom.oneToOne());
+  $("cal-rings").addEventListener("change", () => renderFrame());
+  for (const id of ["cal-altitude", "cal-width", "cal-height", "cal-coefficients", "cal-fit-pp", "cal-fit-tilt"]) {
+    $(id).addEventListener("change", guarded(refit));
+  }
+  for (const input of document.querySelectorAll('input[name="cal-tool"]')) {
+    input.addEventListener("change", () => { $("cal-hint").textContent = HINTS[tool()]; });
+  }
+  $("cal-marks").addEventListener("change", guarded((event) => {
+    const { markId, field } = event.target.dataset;
+    if (markId && field) return editMark(markId, field, event.target.value);
+  }));
+  $("cal-marks").addEventListener("click", guarded((event) => {
+    const button = event.target.closest("button.delete");
+    if (button) return deleteMark(button.dataset.markId);
+    const row = event.target.closest("tr[data-mark-id]");
+    if (row && event.target.tagName !== "INPUT") {
+      cal.selected = Number(row.dataset.markId);
+      render();
+    }
+  }));
+  $("cal-masks").addEventListener("click", guarded((event) => {
+    const button = event.target.closest("button.delete");
+    if (!button) return;
+    cal.masks = cal.masks.filter((_, i) => i !== Number(button.dataset.mask));
+    cal.unsaved = true;
+    render();
+  }));
+  $("cal-import").addEventListener("change", guarded(async (event) => {
+    const [file] = event.target.files;
+    event.target.value = "";
+    if (file) await importCsv(file);
+  }));
+  $("cal-export").addEventListener("click", guarded(download));
+  $("cal-save").addEventListener("click", guarded(save));
+  document.addEventListener("keydown", guarded((event) => {
+    if ($("calibrate-view").hidden || ["INPUT", "SELECT", "TEXTAREA"].includes(event.target.tagName)) return;
+    if (event.key === "Enter" && cal.drawing.length) return closeMask();
+    if (event.key === "Escape" && cal.drawing.length) {
+      cal.drawing = [];
+      return render();
+    }
+    if ((event.key === "Delete" || event.key === "Backspace") && cal.selected !== null) return deleteMark(cal.selected);
+  }));
+}
+
+/** Show the Calibrate mode of camera `cameraId` (a record of `cameras`, or none yet). */
+export async function openCalibrate(cameraId, cameras, setStatus) {
+  report = setStatus;
+  if (!wired) {
+    wire();
+    wired = true;
+  }
+  $("calibrate-view").hidden = false;
+  $("cal-title").textContent = `Calibrate ${cameraId}`;
+  $("cal-hint").textContent = HINTS[tool()];
+  const camera = cameras.find((c) => c.id === cameraId) ?? null;
+  if (cal.cameraId !== cameraId) {
+    if (cal.frame) URL.revokeObjectURL(cal.frame.url);
+    Object.assign(cal, { cameraId, camera, frame: null, marks: [], masks: [], drawing: [], checks: [], selected: null,
+                         fit: null, fitIds: [], fitError: null, unsaved: false });
+    $("cal-check").textContent = "";
+    $("cal-altitude").value = camera ? String(camera.altitude_m) : "";
+    $("cal-width").value = camera ? String(camera.image_size[0]) : "";
+    $("cal-height").value = camera ? String(camera.image_size[1]) : "";
+    $("cal-fit-tilt").checked = Boolean(camera?.tilt_deg?.some((a) => a !== 0));
+    $("cal-frame").replaceChildren();
+    render();
+    if (!camera) setStatus(`camera ${cameraId} is not in the registry yet: the fit makes a new one`);
+    try {
+      await loadLatest();
+    } catch {
+      // no frame yet: the page says so
+    }
+  } else {
+    cal.camera = camera ?? cal.camera;
+    render();
+  }
+}
+
+/** Leave the Calibrate mode (its marks stay for when it is opened again). */
+export function closeCalibrate() {
+  $("calibrate-view").hidden = true;
+}

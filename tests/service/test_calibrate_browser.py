@@ -1,0 +1,349 @@
+"""The viewer's Calibrate mode in a real headless Chromium against a real uvicorn server.
+
+A frame of a known lens (tapes laid on a tiled floor, tape_frames.py) is calibrated by clicking its
+true mark pixels, zoomed in with the wheel as a user would; the saved camera is compared with the
+true lens and with what `fishloc calibrate` makes of the page's exported marks. Bad marks, frames and
+masks must each be explained in the page with the route's own message, and leave the registry as
+it was. The page's JavaScript pixel -> floor geometry is compared with fisheye/.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+from calibrate_page import (
+    cal_state,
+    choose_tool,
+    click_mark,
+    click_pixel,
+    client_of,
+    open_calibrate,
+    settled,
+    type_into,
+    upload_frame,
+    zoom_in_at,
+)
+from service_frames import encode
+from service_live_server import LiveServer
+from tape_frames import TapeFrame, tape_frame
+from viewer_browser import chromium_driver, console_errors, save_screenshot, wait_for
+
+from fisheye import FisheyeCamera, camera_from_dict, camera_to_dict, load_camera
+from fisheye.ruler_marks import marks_to_csv, parse_marks_csv, simulate_ruler_marks
+from service.cli import main
+
+TRUE = camera_from_dict({
+    "id": "tape", "altitude_m": 3.0, "image_size": [1600, 1200], "principal_point": [806.3, 597.8],
+    "focal_px": [420.0, 420.0], "kb": [1.0, -0.03, 0.002],
+})
+# What the registry has before the calibration: an ideal lens guessed at the frame's centre.
+GUESS = dict(camera_to_dict(TRUE), kb=[1.0], focal_px=[400.0, 400.0], principal_point=[799.5, 599.5],
+             site_pose={"x_m": 4.0, "y_m": -1.0, "yaw_deg": 30.0})
+RULERS = {"east": (10.0, [1, 2, 3, 4, 5, 6, 7, 8]), "north": (100.0, [2, 4, 6, 8]),
+          "west": (190.0, [1, 2, 3, 4, 5, 6, 7, 8]), "south": (280.0, [2, 4, 6, 8])}
+OPTIONS = {"coefficients": 3, "fit_principal_point": True, "fit_tilt": False}
+
+
+@pytest.fixture(scope="module")
+def driver() -> Iterator[Any]:
+    with chromium_driver() as chromium:
+        yield chromium
+
+
+@pytest.fixture(scope="module")
+def frame() -> TapeFrame:
+    return tape_frame(TRUE, [azimuth for azimuth, _ in RULERS.values()], list(range(1, 9)))
+
+
+@pytest.fixture(scope="module")
+def frame_path(frame: TapeFrame, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("frames") / "tapes.png"
+    path.write_bytes(encode(frame.bgr, ".png"))
+    return path
+
+
+@pytest.fixture
+def server(settings_for: Any) -> Iterator[LiveServer]:
+    with LiveServer(settings_for()) as live:
+        assert httpx.put(f"{live.url}/v1/cameras/tape", json=GUESS).status_code == 201
+        yield live
+
+
+def registry_camera(server: LiveServer) -> dict[str, Any]:
+    response = httpx.get(f"{server.url}/v1/cameras/tape")
+    assert response.status_code == 200
+    record: dict[str, Any] = response.json()
+    return record
+
+
+def floor_error_at_m(camera: FisheyeCamera, distance_m: float) -> float:
+    """Largest floor-position error of `camera` against the true lens on a circle about the nadir."""
+    phi = np.radians(np.arange(0.0, 360.0, 5.0))
+    xy = distance_m * np.stack([np.cos(phi), np.sin(phi)], axis=1)
+    return float(np.hypot(*(camera.pixels_to_floor(TRUE.floor_to_pixels(xy)) - xy).T).max())
+
+
+def import_marks(driver: Any, tmp_path: Path, csv_text: str, name: str = "marks.csv") -> dict[str, Any]:
+    from selenium.webdriver.common.by import By
+
+    path = tmp_path / name
+    path.write_text(csv_text, encoding="utf-8")
+    before = cal_state(driver)["fitsWanted"]
+    driver.find_element(By.ID, "cal-import").send_keys(str(path))
+    wait_for(lambda: cal_state(driver)["fitsWanted"] > before or cal_state(driver)["statusIsError"],
+             "the import")
+    return settled(driver)
+
+
+def fit_body(state: dict[str, Any], **options: Any) -> dict[str, Any]:
+    """The fit request of the page's marks (its frame is at the image size: no scaling)."""
+    marks = [{"ruler": m["ruler"], "u": m["u"], "v": m["v"], "distance_m": m["distance_m"],
+              **({"x_m": m["x_m"], "y_m": m["y_m"]} if m["x_m"] is not None else {})} for m in state["marks"]]
+    return {"altitude_m": TRUE.altitude_m, "image_size": list(TRUE.image_size), "marks": marks,
+            "options": {**OPTIONS, **options}}
+
+
+def route_refusal(server: LiveServer, body: dict[str, Any]) -> str:
+    response = httpx.post(f"{server.url}/v1/calibrations/fit", json=body)
+    assert 400 <= response.status_code < 500, response.text
+    message: str = response.json()["error"]["message"]
+    return message
+
+
+def edit_mark(driver: Any, index: int, field: str, text: str) -> dict[str, Any]:
+    """Type `text` into the marks table's `field` of mark `index` (0-based) and commit it."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.keys import Keys
+
+    mark_id = cal_state(driver)["marks"][index]["id"]
+    selector = f'#cal-marks input[data-mark-id="{mark_id}"][data-field="{field}"]'
+    field_input = driver.find_element(By.CSS_SELECTOR, selector)
+    field_input.clear()
+    field_input.send_keys(text, Keys.ENTER)
+    driver.find_element(By.ID, "cal-rms").click()  # blur: the change is committed
+    return settled(driver)
+
+
+def test_calibrating_a_rendered_frame_by_clicking_its_marks(
+    driver: Any, server: LiveServer, frame: TapeFrame, frame_path: Path, tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from selenium.webdriver.common.by import By
+
+    open_calibrate(driver, server.url, "tape")
+    state = upload_frame(driver, frame_path)
+    assert state["frame"] == {"width": 1600, "height": 1200}
+    assert state["error"] == "no marks yet: click the nadir, then marks along a tape"
+    choose_tool(driver, "nadir")
+    click_mark(driver, tuple(frame.nadir_px))
+    choose_tool(driver, "mark")
+    for r, (ruler, (_, distances)) in enumerate(RULERS.items()):
+        type_into(driver, "cal-ruler", ruler)
+        type_into(driver, "cal-distance", str(distances[0]))
+        type_into(driver, "cal-step", str(distances[1] - distances[0]))
+        for distance in distances:
+            state = click_mark(driver, tuple(frame.marks_px[r, distance - 1]))
+    assert console_errors(driver) == []
+    marks = state["marks"]
+    assert len(marks) == 1 + sum(len(d) for _, d in RULERS.values())
+    assert [m["distance_m"] for m in marks[:4]] == [0, 1, 2, 3] and marks[1]["ruler"] == "east"
+    truth = np.concatenate([[frame.nadir_px]] + [frame.marks_px[r, np.array(d) - 1]
+                                                   for r, (_, d) in enumerate(RULERS.values())])
+    clicked = np.array([[m["u"], m["v"]] for m in marks])
+    assert np.abs(clicked - truth).max() < 0.1  # 16× zoom: a screen pixel is a sixteenth of a frame pixel
+
+    # The fit, after every click: residuals at the marks, the RMS, rings and one line per tape.
+    fit = state["fit"]
+    assert fit is not None and state["error"] == ""
+    assert fit["rms_m"] < 0.005 and fit["rms_px"] < 0.1
+    rms = f"RMS {fit['rms_m'] * 100:.2f} cm, {fit['rms_px']:.2f} px over {len(marks)} marks"
+    assert state["rms"].startswith(rms)
+    classes = driver.execute_script(
+        "return [...document.querySelectorAll('#cal-frame g.mark')].map((g) => g.getAttribute('class'))")
+    assert len(classes) == len(marks) - 1 and all("good" in c.split() for c in classes)
+    tapes = driver.execute_script("return [...document.querySelectorAll('#cal-frame polyline.tape')].map("
+                                  "(p) => [p.dataset.ruler, Number(p.dataset.azimuthDeg)])")
+    assert sorted(name for name, _ in tapes) == sorted(RULERS)
+    for name, azimuth in tapes:
+        assert (azimuth - RULERS[name][0] + 180) % 360 - 180 == pytest.approx(0, abs=0.2)
+    assert driver.find_elements(By.CSS_SELECTOR, "#cal-frame polyline.ring")
+    assert state["notes"], "the fit's notes are listed"
+
+    # Nothing reaches the registry before Save.
+    assert registry_camera(server) == GUESS
+    assert state["unsaved"]
+    driver.find_element(By.ID, "cal-save").click()
+    wait_for(lambda: cal_state(driver)["saves"] == 1, "the save")
+    saved = registry_camera(server)
+    assert saved["site_pose"] == GUESS["site_pose"]  # where the camera stands is not the lens's business
+    camera = load_camera(saved)
+    assert floor_error_at_m(camera, 8.0) < 0.02
+    assert floor_error_at_m(camera, 5.0) < 0.01
+
+    # The page's marks.csv through `fishloc calibrate` gives the same camera.
+    driver.find_element(By.ID, "cal-export").click()
+    exported = wait_for(lambda: cal_state(driver)["exported"], "the export")
+    assert len(parse_marks_csv(exported)) == len(marks)
+    marks_csv = tmp_path / "marks.csv"
+    marks_csv.write_text(exported, encoding="utf-8")
+    output = tmp_path / "tape.yaml"
+    assert main(["calibrate", "--marks", str(marks_csv), "--altitude", "3.0", "--image-size", "1600", "1200",
+                 "--coefficients", "3", "--fit-principal-point", "-o", str(output)]) == 0
+    cli = camera_to_dict(load_camera(output))
+    for key in ("image_size", "altitude_m"):
+        assert saved[key] == cli[key]
+    for key in ("principal_point", "focal_px", "kb"):
+        np.testing.assert_allclose(saved[key], cli[key], rtol=1e-9, atol=1e-9)
+
+    # Check: a floor point's position and distance by the saved calibration.
+    choose_tool(driver, "check")
+    target = TRUE.floor_to_pixels(np.array([[5.0, -3.0]]))[0]
+    zoom_in_at(driver, (float(target[0]), float(target[1])))
+    click_pixel(driver, (float(target[0]), float(target[1])))
+    check = wait_for(lambda: cal_state(driver)["checks"], "the check")[-1]
+    want = camera.pixels_to_floor(np.array([[check["u"], check["v"]]]))[0]
+    np.testing.assert_allclose(check["xy"], want, rtol=0, atol=0.001)
+    np.testing.assert_allclose(check["xy"], [5.0, -3.0], atol=0.02)
+    text = cal_state(driver)["check"]
+    assert f"floor ({check['xy'][0]:.3f}, {check['xy'][1]:.3f}) m" in text
+    assert f"{math.hypot(*check['xy']):.3f} m from the nadir" in text
+    driver.find_element(By.ID, "cal-whole").click()
+    save_screenshot(driver, "viewer-calibrate.png", capsys)
+    assert console_errors(driver) == []
+
+
+def test_marks_are_moved_relabelled_deleted_and_imported(
+    driver: Any, server: LiveServer, frame_path: Path, tmp_path: Path,
+) -> None:
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.actions.action_builder import ActionBuilder
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.keys import Keys
+
+    open_calibrate(driver, server.url, "tape")
+    upload_frame(driver, frame_path)
+    simulated = simulate_ruler_marks(TRUE, [10.0, 100.0, 190.0, 280.0], np.arange(1.0, 8.001, 1.0))
+    state = import_marks(driver, tmp_path, marks_to_csv(simulated))
+    assert len(state["marks"]) == len(simulated) and state["fit"] is not None
+    np.testing.assert_allclose([[m["u"], m["v"]] for m in state["marks"]], simulated.uv_px, atol=1e-9)
+    rms_before = state["fit"]["rms_m"]
+
+    # Drag mark 5 by 40 screen px: it moves, and its residual shows it.
+    driver.find_element(By.ID, "cal-whole").click()
+    moved = state["marks"][4]
+    x, y = client_of(driver, (moved["u"], moved["v"]))
+    drag = ActionBuilder(driver)
+    drag.pointer_action.move_to_location(round(x), round(y)).pointer_down()
+    drag.pointer_action.move_to_location(round(x) + 20, round(y))
+    drag.pointer_action.move_to_location(round(x) + 40, round(y)).pointer_up()
+    drag.perform()
+    state = wait_for(lambda: (s := settled(driver))["marks"][4]["u"] > moved["u"] + 5 and s, "the drag")
+    assert len(state["marks"]) == len(simulated)
+    assert state["fit"]["rms_m"] > rms_before
+    assert state["fit"]["marks"][4]["err_px"] > 5
+    mark_class = driver.execute_script(
+        "return document.querySelector(`#cal-frame g[data-mark-id='${arguments[0]}']`).getAttribute('class')",
+        moved["id"])
+    assert "bad" in mark_class.split()
+
+    # Selected by the drag, it goes with the Delete key.
+    ActionChains(driver).send_keys(Keys.DELETE).perform()
+    state = wait_for(lambda: len((s := settled(driver))["marks"]) == len(simulated) - 1 and s, "the deletion")
+    assert moved["id"] not in [m["id"] for m in state["marks"]]
+    assert state["fit"]["rms_m"] < 0.002
+
+    # Relabel mark 2 in the table, delete mark 3 with its button.
+    state = edit_mark(driver, 1, "ruler", "tape-b")
+    assert state["marks"][1]["ruler"] == "tape-b"
+    gone = state["marks"][2]["id"]
+    driver.find_element(By.CSS_SELECTOR, f'#cal-marks button.delete[data-mark-id="{gone}"]').click()
+    state = wait_for(lambda: len((s := settled(driver))["marks"]) == len(simulated) - 2 and s, "the deletion")
+    # A mark given its floor position (x, y): the distance follows.
+    state = edit_mark(driver, 3, "x_m", "3.5")
+    state = edit_mark(driver, 3, "y_m", "1.2")
+    assert state["marks"][3]["distance_m"] == pytest.approx(math.hypot(3.5, 1.2), abs=1e-12)
+
+    # The export is the marks.csv of what the page holds; an unreadable file is refused.
+    driver.find_element(By.ID, "cal-export").click()
+    exported = parse_marks_csv(wait_for(lambda: cal_state(driver)["exported"], "the export"))
+    assert exported.ruler[1] == "tape-b" and len(exported) == len(simulated) - 2
+    np.testing.assert_allclose(exported.xy_m[3], [3.5, 1.2])
+    state = import_marks(driver, tmp_path, "ruler,u,v,distance_m\neast,,600,1\n", "broken.csv")
+    assert state["statusIsError"] and state["status"] == "broken.csv line 2: u and v are required"
+    assert len(state["marks"]) == len(simulated) - 2  # unchanged
+    assert registry_camera(server) == GUESS
+    assert [e for e in console_errors(driver) if "/v1/calibrations/fit" not in e] == []
+
+
+def test_bad_input_is_explained_and_nothing_is_saved(
+    driver: Any, server: LiveServer, frame_path: Path, tmp_path: Path,
+) -> None:
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.keys import Keys
+    from selenium.webdriver.support.ui import Select
+
+    open_calibrate(driver, server.url, "tape")
+    upload_frame(driver, frame_path)
+    four = simulate_ruler_marks(TRUE, [10.0, 100.0, 190.0, 280.0], np.arange(1.0, 8.001, 1.0))
+
+    def refused(state: dict[str, Any], code_words: str) -> None:
+        message = route_refusal(server, fit_body(state))
+        assert state["fit"] is None and state["error"] == message, (state["error"], message)
+        assert code_words in message
+        assert registry_camera(server) == GUESS
+
+    # Fewer distinct distances than coefficients.
+    short = simulate_ruler_marks(TRUE, [10.0, 100.0], [1.0])
+    refused(import_marks(driver, tmp_path, marks_to_csv(short), "short.csv"), "coefficients")
+    Select(driver.find_element(By.ID, "cal-coefficients")).select_by_value("1")
+    assert settled(driver)["fit"] is not None
+    Select(driver.find_element(By.ID, "cal-coefficients")).select_by_value("3")
+    settled(driver)
+    # Marks on one radius only, with the principal point fitted.
+    one = simulate_ruler_marks(TRUE, [10.0], np.arange(1.0, 8.001, 1.0))
+    refused(import_marks(driver, tmp_path, marks_to_csv(one), "one.csv"), "direction")
+    # A distance of 0 typed for a mark away from the nadir.
+    import_marks(driver, tmp_path, marks_to_csv(four), "four.csv")
+    refused(edit_mark(driver, 6, "distance_m", "0"), "distance 0")
+    # A farther mark nearer the nadir in the frame than a nearer one: no lens does that.
+    import_marks(driver, tmp_path, marks_to_csv(four), "four.csv")
+    refused(edit_mark(driver, 2, "distance_m", "6.5"), "6.5")
+    # The registry still has the guess, and the page says the change is not saved.
+    assert cal_state(driver)["unsaved"]
+
+    # A frame of another aspect ratio than the image size: the marks cannot be carried over.
+    other = tmp_path / "square.png"
+    other.write_bytes(encode(np.zeros((600, 600, 3), np.uint8), ".png"))
+    state = upload_frame(driver, other)
+    assert state["fit"] is None
+    assert state["error"] == (
+        "the frame is 600×600 px but the image size is 1600×1200 px, another aspect ratio: the marks "
+        "cannot be carried over; take a frame of this camera or enter its size")
+
+    # A self-intersecting mask: flagged while drawn, refused by the service on Save.
+    upload_frame(driver, frame_path)
+    while driver.find_elements(By.CSS_SELECTOR, "#cal-marks button.delete"):
+        driver.find_element(By.CSS_SELECTOR, "#cal-marks button.delete").click()
+        settled(driver)
+    choose_tool(driver, "mask")
+    driver.find_element(By.ID, "cal-whole").click()
+    for corner in ((300, 300), (500, 500), (500, 300), (300, 500)):  # a bow tie
+        click_pixel(driver, corner)
+    wait_for(lambda: "drawing: 4 corners" in cal_state(driver)["masksListed"], "the corners")
+    ActionChains(driver).send_keys(Keys.ENTER).perform()
+    state = wait_for(lambda: (s := cal_state(driver))["masks"] and s, "the mask")
+    assert state["masksListed"][0].startswith("mask 1 crosses itself (edges 1 and 3)")
+    driver.find_element(By.ID, "cal-save").click()
+    wait_for(lambda: cal_state(driver)["statusIsError"], "the refusal")
+    record = dict(GUESS, masks_px=state["masks"])  # the frame is at the image size
+    response = httpx.put(f"{server.url}/v1/cameras/tape", json=record)
+    assert response.status_code == 422
+    assert cal_state(driver)["status"] == response.json()["error"]["message"]
+    assert cal_state(driver)["saves"] == 0 and registry_camera(server) == GUESS
