@@ -3,11 +3,14 @@ point of the frame, clicking frame pixels, typing into the page, and reading bac
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
 from viewer_browser import console_errors, wait_for
 
+# The fit route refuses marks that cannot give a lens yet (the page shows why); the browser logs each.
+_FIT_REFUSAL = re.compile(r"/v1/calibrations/fit - Failed to load resource: .* status of 4\d\d ")
 ZOOM_WHEEL_PX = -960  # one wheel gesture of 960 px zooms in 16×
 
 CLIENT_OF_PIXEL_JS = """
@@ -33,6 +36,11 @@ return {
   screenPerFrame: Number(document.getElementById('cal-frame').getScreenCTM().a),
 };
 """
+
+
+def page_errors(driver: Any) -> list[str]:
+    """The page's errors since the last call, but for the fit route's refusals."""
+    return [error for error in console_errors(driver) if not _FIT_REFUSAL.search(error)]
 
 
 def cal_state(driver: Any) -> dict[str, Any]:

@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 from fisheye import FisheyeCamera
 
 TILE_M = 0.5
+TILED_RADIUS_M = 10.0  # farther out the tiles shrink below a pixel: plain floor there
 TAPE_HALF_WIDTH_M = 0.025
 TICK_RADIUS_M = 0.04
 
@@ -38,10 +39,12 @@ def tape_frame(camera: FisheyeCamera, azimuths_deg: list[float], distances_m: li
     floor = camera.pixels_to_floor(np.stack([u.ravel(), v.ravel()], axis=1)).reshape(height, width, 2)
     x, y = floor[..., 0], floor[..., 1]
     seen = np.isfinite(x)
+    tiled = seen & (np.hypot(np.nan_to_num(x), np.nan_to_num(y)) < TILED_RADIUS_M)
     tiles = (np.floor(np.nan_to_num(x) / TILE_M) + np.floor(np.nan_to_num(y) / TILE_M)) % 2 == 0
     bgr = np.zeros((height, width, 3), dtype=np.uint8)
-    bgr[seen & tiles] = (150, 150, 150)
-    bgr[seen & ~tiles] = (110, 110, 110)
+    bgr[seen] = (90, 90, 90)
+    bgr[tiled & tiles] = (150, 150, 150)
+    bgr[tiled & ~tiles] = (110, 110, 110)
     azimuths = np.asarray(azimuths_deg, dtype=np.float64)
     distances = np.asarray(distances_m, dtype=np.float64)
     reach = float(distances.max()) + 0.3

@@ -188,7 +188,7 @@ WIDE_CAMERA = {
     "id": "wide", "altitude_m": 2.7, "image_size": [2000, 1500], "principal_point": [1012.5, 740.25],
     "focal_px": [610.0, 604.0], "kb": [1.0, -0.021, 0.0013, -0.0002, 0.00001], "max_theta_deg": 80,
 }
-TILTED_CAMERA = dict(WIDE_CAMERA, id="tilted", tilt_deg=[6.0, -3.5], max_theta_deg=88)
+TILTED_CAMERA = dict(WIDE_CAMERA, id="tilted", tilt_deg=[6.0, -3.5])
 
 
 @pytest.mark.parametrize(("camera_record", "resolution_wh"), [

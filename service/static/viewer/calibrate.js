@@ -227,7 +227,8 @@ function renderResult() {
     ? `${cal.frame.source}: ${cal.frame.width}×${cal.frame.height} px${sizeNote} · wheel: zoom at the pointer · ` +
       "drag: pan, or move a mark · click: the tool"
     : "no frame yet";
-  $("cal-saved").textContent = cal.unsaved ? "not saved: the registry still has the previous calibration" : "saved";
+  $("cal-saved").textContent = cal.unsaved ? "not saved: the registry still has the previous calibration"
+    : cal.saves ? "saved" : "";
 }
 
 function render() {

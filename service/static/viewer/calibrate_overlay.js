@@ -65,7 +65,9 @@ function masksLayer(masks, drawing, fontPx) {
   return layer;
 }
 
-function marksLayer(marks, residuals, selected, fontPx) {
+const LABEL_ALL_SCALE = 1.5; // zoomed out below this (screen px per frame px), only marks that need a look are labelled
+
+function marksLayer(marks, residuals, selected, fontPx, screenPerFrame) {
   const layer = svg("g", { class: "marks" });
   marks.forEach((mark, index) => {
     const residual = residuals.get(mark.id) ?? null;
@@ -83,7 +85,9 @@ function marksLayer(marks, residuals, selected, fontPx) {
     const label = nadir ? `${index + 1} · nadir` : `${index + 1} · ${fmt(mark.distance_m, 2)} m`;
     const text = !nadir && residual && Number.isFinite(residual.err_m)
       ? `${label} ${residual.err_m >= 0 ? "+" : "−"}${fmt(Math.abs(residual.err_m) * 100, 1)} cm` : label;
-    group.append(svg("text", { x: mark.u + r * 1.4, y: mark.v - r * 1.4, "font-size": fontPx }, [text]));
+    const quiet = screenPerFrame < LABEL_ALL_SCALE && mark.id !== selected &&
+      ["good", "none"].includes(residualClass(residual?.err_m)) && !nadir;
+    if (!quiet) group.append(svg("text", { x: mark.u + r * 1.4, y: mark.v - r * 1.4, "font-size": fontPx }, [text]));
     layer.append(group);
   });
   return layer;
@@ -119,7 +123,7 @@ export function calibrateOverlay({ camera, frameWh, showRings, marks, residuals,
     }
   }
   overlay.append(masksLayer(masks, drawing, fontPx));
-  overlay.append(marksLayer(marks, residuals, selected, fontPx));
+  overlay.append(marksLayer(marks, residuals, selected, fontPx, screenPerFrame));
   overlay.append(checksLayer(checks, fontPx));
   return overlay;
 }
