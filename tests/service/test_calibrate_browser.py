@@ -14,6 +14,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import cv2
 import httpx
 import numpy as np
 import pytest
@@ -351,3 +352,66 @@ def test_bad_input_is_explained_and_nothing_is_saved(
     assert response.status_code == 422
     assert cal_state(driver)["status"] == response.json()["error"]["message"]
     assert cal_state(driver)["saves"] == 0 and registry_camera(server) == GUESS
+
+
+def test_masks_and_marks_on_a_smaller_frame_are_saved_at_the_image_size_with_the_token(
+    driver: Any, settings_for: Any, frame: TapeFrame, tmp_path: Path,
+) -> None:
+    from selenium.webdriver.common.by import By
+
+    token = "calibration-token"
+    with LiveServer(settings_for(api_token=token)) as server:
+        auth = {"Authorization": f"Bearer {token}"}
+        assert httpx.put(f"{server.url}/v1/cameras/tape", json=GUESS, headers=auth).status_code == 201
+        half = tmp_path / "half.png"  # what a gateway sending half-size frames would show
+        half.write_bytes(encode(cv2.resize(frame.bgr, (800, 600), interpolation=cv2.INTER_AREA), ".png"))
+        open_calibrate(driver, server.url, "tape")
+        upload_frame(driver, half)
+
+        # Marks taken at the image size land on the half-size frame, and fit as they were taken.
+        simulated = simulate_ruler_marks(TRUE, [10.0, 100.0, 190.0, 280.0], np.arange(1.0, 8.001, 1.0))
+        state = import_marks(driver, tmp_path, marks_to_csv(simulated))
+        on_frame = [[m["u"], m["v"]] for m in state["marks"]]
+        np.testing.assert_allclose(on_frame, (simulated.uv_px + 0.5) / 2 - 0.5, rtol=0, atol=1e-9)
+        assert "marks scaled to 1600×1200 px" in driver.find_element(By.ID, "cal-frame-info").text
+        body = {"altitude_m": 3.0, "image_size": [1600, 1200], "options": OPTIONS,
+                "marks": [{"ruler": r, "u": float(u), "v": float(v), "distance_m": float(d)} for r, (u, v), d
+                          in zip(simulated.ruler, simulated.uv_px, simulated.distance_m, strict=True)]}
+        direct = httpx.post(f"{server.url}/v1/calibrations/fit", json=body)
+        assert direct.status_code == 200, direct.text
+        for key in ("principal_point", "focal_px", "kb"):
+            np.testing.assert_allclose(state["fit"]["camera"][key], direct.json()["camera"][key], rtol=1e-9)
+
+        # A mask of four corners, closed by clicking the first one again.
+        choose_tool(driver, "mask")
+        driver.find_element(By.ID, "cal-whole").click()
+        corners = [(100.0, 80.0), (260.0, 90.0), (250.0, 170.0), (110.0, 160.0)]
+        for corner in [*corners, corners[0]]:
+            click_pixel(driver, corner)
+        state = wait_for(lambda: (s := cal_state(driver))["masks"] and s, "the mask")
+        drawn = np.array(state["masks"][0])
+        np.testing.assert_allclose(drawn, corners, atol=1.0)  # whole frame: a screen pixel is ~1.4 frame px
+        assert state["masksListed"] == ["mask 1: 4 corners ✕"]
+
+        # Without the token the service refuses, and says so; with it the camera is saved.
+        driver.find_element(By.ID, "cal-save").click()
+        wait_for(lambda: cal_state(driver)["statusIsError"], "the refusal")
+        assert cal_state(driver)["status"] == "registry writes need 'Authorization: Bearer <token>'"
+        assert registry_camera(server) == GUESS
+        refusals = page_errors(driver)  # the browser logs the refused request itself
+        assert len(refusals) == 1 and "/v1/cameras/tape" in refusals[0] and "401" in refusals[0]
+        type_into(driver, "cal-token", token)
+        driver.find_element(By.ID, "cal-save").click()
+        wait_for(lambda: cal_state(driver)["saves"] == 1, "the save")
+        saved = registry_camera(server)
+        np.testing.assert_allclose(saved["masks_px"][0], (drawn + 0.5) * 2 - 0.5, rtol=0, atol=1e-9)
+        for key in ("principal_point", "focal_px", "kb"):
+            np.testing.assert_allclose(saved[key], direct.json()["camera"][key], rtol=1e-9)
+        assert saved["image_size"] == [1600, 1200] and saved["site_pose"] == GUESS["site_pose"]
+
+        # Opened again, the page draws the saved mask on the frame.
+        open_calibrate(driver, server.url, "tape")
+        state = upload_frame(driver, half)
+        np.testing.assert_allclose(state["masks"][0], drawn, rtol=0, atol=1e-9)
+        assert len(driver.find_elements(By.CSS_SELECTOR, "#cal-frame polygon.mask")) == 1
+        assert page_errors(driver) == []
