@@ -51,6 +51,7 @@ def cal_state(driver: Any) -> dict[str, Any]:
 def open_calibrate(driver: Any, url: str, camera_id: str) -> None:
     """Load the page on the Calibrate mode of `camera_id`; fail at once on a page error."""
     driver.get("about:blank")
+    driver.get_log("browser")  # forget what earlier pages logged
     driver.get(f"{url}/#/calibrate/{camera_id}")
 
     def ready() -> bool:
