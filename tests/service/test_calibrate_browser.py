@@ -103,12 +103,13 @@ def import_marks(driver: Any, tmp_path: Path, csv_text: str, name: str = "marks.
     return settled(driver)
 
 
-def fit_body(state: dict[str, Any], **options: Any) -> dict[str, Any]:
-    """The fit request of the page's marks (its frame is at the image size: no scaling)."""
+def fit_body(state: dict[str, Any]) -> dict[str, Any]:
+    """The fit request of the page's marks, in pixels of its frame."""
     marks = [{"ruler": m["ruler"], "u": m["u"], "v": m["v"], "distance_m": m["distance_m"],
               **({"x_m": m["x_m"], "y_m": m["y_m"]} if m["x_m"] is not None else {})} for m in state["marks"]]
-    return {"altitude_m": TRUE.altitude_m, "image_size": list(TRUE.image_size), "marks": marks,
-            "options": {**OPTIONS, **options}}
+    frame = state["frame"]
+    return {"camera_id": "tape", "altitude_m": TRUE.altitude_m, "image_size": list(TRUE.image_size),
+            "frame_size": [frame["width"], frame["height"]], "marks": marks, "options": OPTIONS}
 
 
 def route_refusal(server: LiveServer, body: dict[str, Any]) -> str:
@@ -323,14 +324,12 @@ def test_bad_input_is_explained_and_nothing_is_saved(
     # The registry still has the guess, and the page says the change is not saved.
     assert cal_state(driver)["unsaved"]
 
-    # A frame of another aspect ratio than the image size: the marks cannot be carried over.
+    # A frame of another aspect ratio than the camera's image size.
     other = tmp_path / "square.png"
     other.write_bytes(encode(np.zeros((600, 600, 3), np.uint8), ".png"))
     state = upload_frame(driver, other)
-    assert state["fit"] is None
-    assert state["error"] == (
-        "the frame is 600×600 px but the image size is 1600×1200 px, another aspect ratio: the marks "
-        "cannot be carried over; take a frame of this camera or enter its size")
+    assert state["frame"] == {"width": 600, "height": 600}
+    refused(state, "aspect ratio")
 
     # A self-intersecting mask: flagged while drawn, refused by the service on Save.
     upload_frame(driver, frame_path)

@@ -4,8 +4,9 @@
 // masks, and save the camera with PUT /v1/cameras/{id}: nothing is written before Save. The Check
 // tool then gives the floor position of any clicked pixel by the saved calibration.
 //
-// Marks and masks are kept in frame pixels; the fit, marks.csv and `masks_px` use the image size
-// (u' = (u + 0.5)·s − 0.5 when the frame has another resolution of the same aspect ratio).
+// Marks and masks are kept in frame pixels; the fit is sent them with the frame's size, while
+// marks.csv and `masks_px` are at the image size (u' = (u + 0.5)·s − 0.5 when the frame has another
+// resolution of the same aspect ratio).
 
 import { api } from "./api.js";
 import { calibrateOverlay } from "./calibrate_overlay.js";
@@ -62,9 +63,15 @@ function frameWh() {
 function imageWh() {
   const size = [Number($("cal-width").value), Number($("cal-height").value)];
   if (!size.every((n) => Number.isInteger(n) && n >= 2)) return new Error("enter the image size (whole pixels, 2 or more)");
-  if (cal.frame && Math.abs(size[0] * cal.frame.height - size[1] * cal.frame.width) > Math.max(...size)) {
+  return size;
+}
+
+/** `size` when the frame's pixels scale to it (same aspect ratio, as the service allows), else an Error. */
+function scalableTo(size) {
+  if (size instanceof Error) return size;
+  if (Math.abs(size[0] * cal.frame.height - size[1] * cal.frame.width) > Math.max(...size)) {
     return new Error(`the frame is ${cal.frame.width}×${cal.frame.height} px but the image size is ${size[0]}×${size[1]} px, ` +
-                     "another aspect ratio: the marks cannot be carried over; take a frame of this camera or enter its size");
+                     "another aspect ratio: take a frame of this camera or enter its size");
   }
   return size;
 }
@@ -78,13 +85,14 @@ function fitRequest() {
   if (size instanceof Error) return size;
   const altitude = Number($("cal-altitude").value);
   if (!(altitude > 0)) return new Error("enter the altitude of the lens above the floor (m, > 0)");
-  const uv = rescalePoints(cal.marks.map((m) => [m.u, m.v]), frameWh(), size);
+  // Marks go in frame pixels with the frame's size: the service scales them to the image size.
   return {
+    camera_id: cal.cameraId,
     altitude_m: altitude,
     image_size: size,
-    marks: cal.marks.map((m, i) => ({
-      ruler: m.ruler, u: uv[i][0], v: uv[i][1], distance_m: m.distance_m,
-      ...(m.x_m !== null ? { x_m: m.x_m, y_m: m.y_m } : {}),
+    frame_size: frameWh(),
+    marks: cal.marks.map((m) => ({
+      ruler: m.ruler, u: m.u, v: m.v, distance_m: m.distance_m, ...(m.x_m !== null ? { x_m: m.x_m, y_m: m.y_m } : {}),
     })),
     options: {
       coefficients: Number($("cal-coefficients").value),
@@ -390,7 +398,7 @@ function onFrameClick(u, v, element) {
 
 async function importCsv(file) {
   if (!cal.frame) throw new Error("load the frame the marks were taken on first");
-  const size = imageWh();
+  const size = scalableTo(imageWh());
   if (size instanceof Error) throw size;
   const marks = parseMarksCsv(await file.text(), file.name);
   const uv = rescalePoints(marks.map((m) => [m.u, m.v]), size, frameWh());
@@ -403,7 +411,8 @@ async function importCsv(file) {
 
 /** The marks.csv text of the marks, in pixels of the image size. */
 function exportCsv() {
-  const size = imageWh();
+  if (!cal.frame) throw new Error("no marks to export: load a frame and click some");
+  const size = scalableTo(imageWh());
   if (size instanceof Error) throw size;
   const uv = rescalePoints(cal.marks.map((m) => [m.u, m.v]), frameWh(), size);
   return marksToCsv(cal.marks.map((m, i) => ({ ...m, u: uv[i][0], v: uv[i][1] })));
@@ -426,6 +435,7 @@ function recordToSave() {
   const base = cal.fit ? cal.fit.camera : cal.camera;
   if (!base) throw new Error(`camera ${cal.cameraId} is not in the registry and has no fit`);
   const keep = Object.fromEntries(["site", "site_pose"].filter((k) => cal.camera?.[k] != null).map((k) => [k, cal.camera[k]]));
+  if (cal.frame && scalableTo(base.image_size) instanceof Error) throw scalableTo(base.image_size);
   const masks = cal.frame ? cal.masks.map((points) => rescalePoints(points, frameWh(), base.image_size)) : (cal.camera?.masks_px ?? []);
   return { ...base, ...keep, id: cal.cameraId, masks_px: masks };
 }
