@@ -305,6 +305,32 @@ def test_bad_input_is_explained_and_nothing_is_saved(
         assert code_words in message
         assert registry_camera(server) == GUESS
 
+    def warnings() -> list[list[str]]:
+        found: list[list[str]] = driver.execute_script(
+            "return [...document.querySelectorAll('#cal-notes li.warning')].map((li) => [li.dataset.code, "
+            "li.textContent])")
+        return found
+
+    def route_warnings(state: dict[str, Any], **options: Any) -> list[list[str]]:
+        body = fit_body(state)
+        body["options"] = {**body["options"], **options}
+        answer = httpx.post(f"{server.url}/v1/calibrations/fit", json=body)
+        assert answer.status_code == 200, answer.text
+        return [[n["code"], n["message"]] for n in answer.json()["notes"] if n["level"] == "warning"]
+
+    # Marks that stay near the nadir fit, with a warning to reach farther out; so does a tilt that
+    # such marks cannot pin down.
+    near = simulate_ruler_marks(TRUE, [10.0, 100.0, 190.0, 280.0], [0.5, 1.0, 1.5, 2.0])
+    state = import_marks(driver, tmp_path, marks_to_csv(near), "near.csv")
+    assert state["fit"] is not None
+    assert warnings() == route_warnings(state) and [code for code, _ in warnings()] == ["marks_short"]
+    driver.find_element(By.ID, "cal-fit-tilt").click()
+    state = settled(driver)
+    assert warnings() == route_warnings(state, fit_tilt=True)
+    assert {code for code, _ in warnings()} == {"marks_short", "tilt_undetermined"}
+    driver.find_element(By.ID, "cal-fit-tilt").click()
+    settled(driver)
+
     # Fewer distinct distances than coefficients.
     short = simulate_ruler_marks(TRUE, [10.0, 100.0], [1.0])
     refused(import_marks(driver, tmp_path, marks_to_csv(short), "short.csv"), "coefficients")
