@@ -8,13 +8,13 @@ allows this service alone.
 
 from __future__ import annotations
 
-from functools import cache
 from pathlib import Path
 
 from fastapi import APIRouter
 from fastapi.responses import Response
 
 from service.errors import ApiError
+from service.packaged_files import PackagedFiles
 
 router = APIRouter(include_in_schema=False)
 
@@ -29,18 +29,12 @@ CONTENT_SECURITY_POLICY = (
     "default-src 'self'; img-src 'self' data:; style-src 'self' 'unsafe-inline'; script-src 'self'; "
     "connect-src 'self'; object-src 'none'; base-uri 'none'; frame-ancestors 'none'"
 )
-_HEADERS = {"Content-Security-Policy": CONTENT_SECURITY_POLICY, "X-Content-Type-Options": "nosniff",
-            "Cache-Control": "no-cache"}
-
-
-@cache
-def _read_asset(name: str) -> bytes:
-    return (ASSETS_DIR / name).read_bytes()
+_FILES = PackagedFiles(ASSETS_DIR, CONTENT_SECURITY_POLICY)
 
 
 @router.get("/docs", response_class=Response)
 async def docs_page() -> Response:
-    return Response(_read_asset("index.html"), media_type="text/html; charset=utf-8", headers=_HEADERS)
+    return _FILES.response("index.html", "text/html; charset=utf-8")
 
 
 @router.get("/docs/assets/{name}", response_class=Response)
@@ -48,4 +42,4 @@ async def docs_asset(name: str) -> Response:
     media_type = _MEDIA_TYPES.get(name)
     if media_type is None:
         raise ApiError(404, "not_found", f"no docs asset {name!r}")
-    return Response(_read_asset(name), media_type=media_type, headers=_HEADERS)
+    return _FILES.response(name, media_type)

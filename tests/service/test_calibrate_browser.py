@@ -50,6 +50,8 @@ GUESS = dict(camera_to_dict(TRUE), kb=[1.0], focal_px=[400.0, 400.0], principal_
 RULERS = {"east": (10.0, [1, 2, 3, 4, 5, 6, 7, 8]), "north": (100.0, [2, 4, 6, 8]),
           "west": (190.0, [1, 2, 3, 4, 5, 6, 7, 8]), "south": (280.0, [2, 4, 6, 8])}
 OPTIONS = {"coefficients": 3, "fit_principal_point": True, "fit_tilt": False}
+# The marks a user takes of TRUE along four tapes, a mark every metre out to 8 m.
+FOUR_TAPES = simulate_ruler_marks(TRUE, [10.0, 100.0, 190.0, 280.0], np.arange(1.0, 8.001, 1.0))
 
 
 @pytest.fixture(scope="module")
@@ -233,7 +235,7 @@ def test_marks_are_moved_relabelled_deleted_and_imported(
 
     open_calibrate(driver, server.url, "tape")
     upload_frame(driver, frame_path)
-    simulated = simulate_ruler_marks(TRUE, [10.0, 100.0, 190.0, 280.0], np.arange(1.0, 8.001, 1.0))
+    simulated = FOUR_TAPES
     state = import_marks(driver, tmp_path, marks_to_csv(simulated))
     assert len(state["marks"]) == len(simulated) and state["fit"] is not None
     np.testing.assert_allclose([[m["u"], m["v"]] for m in state["marks"]], simulated.uv_px, atol=1e-9)
@@ -297,7 +299,6 @@ def test_bad_input_is_explained_and_nothing_is_saved(
 
     open_calibrate(driver, server.url, "tape")
     upload_frame(driver, frame_path)
-    four = simulate_ruler_marks(TRUE, [10.0, 100.0, 190.0, 280.0], np.arange(1.0, 8.001, 1.0))
 
     def refused(state: dict[str, Any], code_words: str) -> None:
         message = route_refusal(server, fit_body(state))
@@ -342,10 +343,10 @@ def test_bad_input_is_explained_and_nothing_is_saved(
     one = simulate_ruler_marks(TRUE, [10.0], np.arange(1.0, 8.001, 1.0))
     refused(import_marks(driver, tmp_path, marks_to_csv(one), "one.csv"), "direction")
     # A distance of 0 typed for a mark away from the nadir.
-    import_marks(driver, tmp_path, marks_to_csv(four), "four.csv")
+    import_marks(driver, tmp_path, marks_to_csv(FOUR_TAPES), "four.csv")
     refused(edit_mark(driver, 6, "distance_m", "0"), "distance 0")
     # A farther mark nearer the nadir in the frame than a nearer one: no lens does that.
-    import_marks(driver, tmp_path, marks_to_csv(four), "four.csv")
+    import_marks(driver, tmp_path, marks_to_csv(FOUR_TAPES), "four.csv")
     refused(edit_mark(driver, 2, "distance_m", "6.5"), "6.5")
     # The registry still has the guess, and the page says the change is not saved.
     assert cal_state(driver)["unsaved"]
@@ -394,7 +395,7 @@ def test_masks_and_marks_on_a_smaller_frame_are_saved_at_the_image_size_with_the
         upload_frame(driver, half)
 
         # Marks taken at the image size land on the half-size frame, and fit as they were taken.
-        simulated = simulate_ruler_marks(TRUE, [10.0, 100.0, 190.0, 280.0], np.arange(1.0, 8.001, 1.0))
+        simulated = FOUR_TAPES
         state = import_marks(driver, tmp_path, marks_to_csv(simulated))
         on_frame = [[m["u"], m["v"]] for m in state["marks"]]
         np.testing.assert_allclose(on_frame, (simulated.uv_px + 0.5) / 2 - 0.5, rtol=0, atol=1e-9)

@@ -8,15 +8,12 @@ service is reached by its loopback address. The page must still list every opera
 from __future__ import annotations
 
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import httpx
 import pytest
 from service_live_server import LiveServer
 from viewer_browser import chromium_driver, wait_for
-
-from service.config import Settings
 
 # Every host but the loopback address (a CDN, fonts, a validator) fails to resolve.
 OFFLINE_FLAGS = ("--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1",)
@@ -29,15 +26,6 @@ def offline_driver() -> Iterator[Any]:
         yield chromium
 
 
-@pytest.fixture(scope="module")
-def server(tmp_path_factory: pytest.TempPathFactory, double_model_path: Path) -> Iterator[LiveServer]:
-    folder = tmp_path_factory.mktemp("docs")
-    settings = Settings(model=double_model_path, database=str(folder / "cameras.db"), http_port=0,
-                        grpc_port=-1, threads=1)
-    with LiveServer(settings) as live:
-        yield live
-
-
 def test_the_browser_reaches_no_other_host(offline_driver: Any) -> None:
     offline_driver.get("about:blank")
     outcome = offline_driver.execute_async_script(
@@ -47,13 +35,13 @@ def test_the_browser_reaches_no_other_host(offline_driver: Any) -> None:
     assert outcome == "failed: TypeError"
 
 
-def test_docs_list_every_operation_offline(offline_driver: Any, server: LiveServer) -> None:
-    spec = httpx.get(f"{server.url}/openapi.json").json()
+def test_docs_list_every_operation_offline(offline_driver: Any, live_server: LiveServer) -> None:
+    spec = httpx.get(f"{live_server.url}/openapi.json").json()
     operations = sorted((method.upper(), path) for path, item in spec["paths"].items()
                         for method in item if method in HTTP_METHODS)
     assert ("PUT", "/v1/cameras/{camera_id}") in operations
     offline_driver.get_log("browser")  # forget what earlier pages logged
-    offline_driver.get(f"{server.url}/docs")
+    offline_driver.get(f"{live_server.url}/docs")
 
     def listed() -> list[tuple[str, str]]:
         found: list[list[str]] = offline_driver.execute_script(
@@ -66,18 +54,18 @@ def test_docs_list_every_operation_offline(offline_driver: Any, server: LiveServ
     assert listed() == operations
     resources = offline_driver.execute_script(
         "return performance.getEntriesByType('resource').map((e) => e.name)")
-    assert resources and all(url.startswith(f"{server.url}/") for url in resources), resources
-    assert {url.removeprefix(server.url) for url in resources} >= {
+    assert resources and all(url.startswith(f"{live_server.url}/") for url in resources), resources
+    assert {url.removeprefix(live_server.url) for url in resources} >= {
         "/docs/assets/swagger-ui-bundle.js", "/docs/assets/swagger-ui.css", "/openapi.json"}
     errors = [entry["message"] for entry in offline_driver.get_log("browser") if entry["level"] == "SEVERE"]
     assert errors == []
 
 
-def test_docs_assets_are_only_the_shipped_files(server: LiveServer) -> None:
+def test_docs_assets_are_only_the_shipped_files(live_server: LiveServer) -> None:
     for name, media_type in (("swagger-ui-bundle.js", "text/javascript"), ("swagger-ui.css", "text/css")):
-        response = httpx.get(f"{server.url}/docs/assets/{name}")
+        response = httpx.get(f"{live_server.url}/docs/assets/{name}")
         assert response.status_code == 200 and response.headers["content-type"].startswith(media_type)
         assert "default-src 'self'" in response.headers["content-security-policy"]
     for name in ("LICENSE", "../routes/docs.py", "index.html"):
-        response = httpx.get(f"{server.url}/docs/assets/{name}")
+        response = httpx.get(f"{live_server.url}/docs/assets/{name}")
         assert response.status_code == 404 and response.json()["error"]["code"] == "not_found"
