@@ -389,10 +389,15 @@ def test_masks_and_marks_on_a_smaller_frame_are_saved_at_the_image_size_with_the
     with LiveServer(settings_for(api_token=token)) as server:
         auth = {"Authorization": f"Bearer {token}"}
         assert httpx.put(f"{server.url}/v1/cameras/tape", json=GUESS, headers=auth).status_code == 201
-        half = tmp_path / "half.png"  # what a gateway sending half-size frames would show
-        half.write_bytes(encode(cv2.resize(frame.bgr, (800, 600), interpolation=cv2.INTER_AREA), ".png"))
+        # The camera sends half-size frames: the page opens on its latest one.
+        half = encode(cv2.resize(frame.bgr, (800, 600), interpolation=cv2.INTER_AREA), ".png")
+        sent = httpx.post(f"{server.url}/v1/cameras/tape/detect", content=half,
+                          headers={"content-type": "image/png"})
+        assert sent.status_code == 200, sent.text
         open_calibrate(driver, server.url, "tape")
-        upload_frame(driver, half)
+        wait_for(lambda: cal_state(driver)["frame"], "the latest frame")
+        assert cal_state(driver)["frame"] == {"width": 800, "height": 600}
+        assert driver.find_element(By.ID, "cal-frame-info").text.startswith("latest frame #")
 
         # Marks taken at the image size land on the half-size frame, and fit as they were taken.
         simulated = FOUR_TAPES
@@ -437,7 +442,8 @@ def test_masks_and_marks_on_a_smaller_frame_are_saved_at_the_image_size_with_the
 
         # Opened again, the page draws the saved mask on the frame.
         open_calibrate(driver, server.url, "tape")
-        state = upload_frame(driver, half)
+        wait_for(lambda: cal_state(driver)["frame"], "the latest frame")
+        state = settled(driver)
         np.testing.assert_allclose(state["masks"][0], drawn, rtol=0, atol=1e-9)
         assert len(driver.find_elements(By.CSS_SELECTOR, "#cal-frame polygon.mask")) == 1
         assert page_errors(driver) == []
