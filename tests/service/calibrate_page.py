@@ -25,7 +25,7 @@ return {
   marks: cal.marks.map((m) => ({...m})), masks: cal.masks, fit: cal.fit, fitError: cal.fitError,
   fitsWanted: cal.fitsWanted, fitsDone: cal.fitsDone, fitting: cal.fitting, saves: cal.saves,
   camera: cal.camera, frame: cal.frame && {width: cal.frame.width, height: cal.frame.height},
-  checks: cal.checks, exported: cal.exported ?? null, unsaved: cal.unsaved,
+  checks: cal.checks, frames: cal.frames, exported: cal.exported ?? null, unsaved: cal.unsaved,
   error: document.getElementById('cal-error').textContent,
   status: document.getElementById('status').textContent,
   statusIsError: document.getElementById('status').classList.contains('error'),
@@ -74,8 +74,9 @@ def settled(driver: Any) -> dict[str, Any]:
 def upload_frame(driver: Any, path: Path) -> dict[str, Any]:
     from selenium.webdriver.common.by import By
 
+    before = cal_state(driver)["frames"]
     driver.find_element(By.ID, "cal-upload").send_keys(str(path))
-    wait_for(lambda: (cal_state(driver)["frame"] or {}).get("width"), f"the frame {path.name}")
+    wait_for(lambda: cal_state(driver)["frames"] > before, f"the frame {path.name}")
     return settled(driver)
 
 

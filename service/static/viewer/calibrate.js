@@ -46,6 +46,7 @@ export const calibrateState = {
   fitsDone: 0,
   fitting: false,
   unsaved: false,
+  frames: 0,           // frames loaded
   saves: 0,
   renders: 0,
 };
@@ -266,6 +267,7 @@ async function loadFrame(blob, source) {
   });
   cal.masks = old ? cal.masks.map(carry) : savedMasks([width, height]);
   cal.frame = { url, width, height, source };
+  cal.frames += 1;
   cal.checks = [];
   const root = $("cal-frame");
   root.replaceChildren(svg("image", { href: url, x: -0.5, y: -0.5, width, height, preserveAspectRatio: "none" }));
