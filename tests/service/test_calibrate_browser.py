@@ -447,3 +447,36 @@ def test_masks_and_marks_on_a_smaller_frame_are_saved_at_the_image_size_with_the
         np.testing.assert_allclose(state["masks"][0], drawn, rtol=0, atol=1e-9)
         assert len(driver.find_elements(By.CSS_SELECTOR, "#cal-frame polygon.mask")) == 1
         assert page_errors(driver) == []
+
+
+def test_a_tilted_camera_is_fitted_and_checked_with_its_tilt(
+    driver: Any, server: LiveServer, tmp_path: Path,
+) -> None:
+    from selenium.webdriver.common.by import By
+
+    tilted = camera_from_dict(dict(camera_to_dict(TRUE), tilt_deg=[3.0, -2.0]))
+    path = tmp_path / "tilted.png"
+    azimuths = [0.0, 60.0, 120.0, 180.0, 240.0, 300.0]
+    path.write_bytes(encode(tape_frame(tilted, azimuths, [2, 4, 6, 8]).bgr, ".png"))
+    open_calibrate(driver, server.url, "tape")
+    upload_frame(driver, path)
+    marks = simulate_ruler_marks(tilted, azimuths, np.arange(1.0, 8.001, 1.0))
+    level = import_marks(driver, tmp_path, marks_to_csv(marks))
+    driver.find_element(By.ID, "cal-fit-tilt").click()
+    state = settled(driver)
+    assert state["fit"]["rms_m"] < level["fit"]["rms_m"] / 10
+    np.testing.assert_allclose(state["fit"]["camera"]["tilt_deg"], [3.0, -2.0], atol=0.05)
+    driver.find_element(By.ID, "cal-save").click()
+    wait_for(lambda: cal_state(driver)["saves"] == 1, "the save")
+    saved = load_camera(registry_camera(server))
+    np.testing.assert_allclose(saved.tilt_deg, [3.0, -2.0], atol=0.05)
+
+    choose_tool(driver, "check")
+    target = tilted.floor_to_pixels(np.array([[6.0, 2.0]]))[0]
+    zoom_in_at(driver, (float(target[0]), float(target[1])))
+    click_pixel(driver, (float(target[0]), float(target[1])))
+    check = wait_for(lambda: cal_state(driver)["checks"], "the check")[-1]
+    np.testing.assert_allclose(check["xy"], saved.pixels_to_floor(np.array([[check["u"], check["v"]]]))[0],
+                               rtol=0, atol=0.001)
+    np.testing.assert_allclose(check["xy"], [6.0, 2.0], atol=0.02)
+    assert page_errors(driver) == []
