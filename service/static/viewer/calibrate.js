@@ -10,10 +10,12 @@
 
 import { api } from "./api.js";
 import { calibrateOverlay } from "./calibrate_overlay.js";
-import { fmt, fmtPair, html, svg } from "./dom.js";
+import { renderPanel } from "./calibrate_panel.js";
+import { fmt, html, svg } from "./dom.js";
 import { pixelToFloorPoint, scaledCamera } from "./geometry.js";
+import { withEdit, withNadir } from "./mark_edits.js";
 import { marksToCsv, parseMarksCsv } from "./marks_csv.js";
-import { maskProblem, rescalePoints } from "./masks.js";
+import { rescalePoints } from "./masks.js";
 import { attachZoomPan } from "./zoom_pan.js";
 
 const $ = (id) => document.getElementById(id);
@@ -171,80 +173,12 @@ function renderFrame() {
   else root.append(next);
 }
 
-function numberCell(mark, field, digits) {
-  const value = mark[field];
-  return html("td", {}, [html("input", {
-    type: "number", step: "any", "data-mark-id": mark.id, "data-field": field, size: 6,
-    value: value === null ? "" : +value.toFixed(digits),
-  })]);
-}
-
-function renderMarksTable() {
-  const active = document.activeElement;
-  // A value being typed survives the redraw that a finished fit brings.
-  const focused = active?.dataset?.field && $("cal-marks").contains(active)
-    ? { ...active.dataset, value: active.value } : null;
-  const byId = residuals();
-  const rows = cal.marks.map((mark, index) => {
-    const residual = byId.get(mark.id);
-    return html("tr", { "data-mark-id": mark.id, class: mark.id === cal.selected ? "selected" : null }, [
-      html("td", { text: mark.distance_m === 0 ? `${index + 1} nadir` : index + 1 }),
-      html("td", {}, [html("input", { "data-mark-id": mark.id, "data-field": "ruler", value: mark.ruler, size: 6 })]),
-      numberCell(mark, "distance_m", 4), numberCell(mark, "x_m", 4), numberCell(mark, "y_m", 4),
-      html("td", { text: fmtPair([mark.u, mark.v], 1) }),
-      html("td", { class: "err-m", text: residual && residual.err_m !== null ? fmt(residual.err_m * 100, 1) : "–" }),
-      html("td", { class: "err-px", text: residual && residual.err_px !== null ? fmt(residual.err_px, 2) : "–" }),
-      html("td", {}, [html("button", { type: "button", class: "delete", "data-mark-id": mark.id, title: "delete", text: "✕" })]),
-    ]);
-  });
-  $("cal-marks").querySelector("tbody").replaceChildren(...rows);
-  const again = focused && $("cal-marks").querySelector(`input[data-mark-id="${focused.markId}"][data-field="${focused.field}"]`);
-  if (again) {
-    again.value = focused.value;
-    again.focus();
-  }
-}
-
-function renderMasks() {
-  const items = cal.masks.map((points, index) => {
-    const problem = maskProblem(points, index);
-    return html("li", { "data-mask": index, class: problem ? "error" : null }, [
-      problem ?? `mask ${index + 1}: ${points.length} corners`, " ",
-      html("button", { type: "button", class: "delete", "data-mask": index, text: "✕" }),
-    ]);
-  });
-  if (cal.drawing.length) items.push(html("li", { class: "muted", text: `drawing: ${cal.drawing.length} corners` }));
-  $("cal-masks").replaceChildren(...items);
-}
-
-function renderResult() {
-  const fit = cal.fit;
-  $("cal-rms").textContent = fit
-    ? `RMS ${fmt(fit.rms_m * 100, 2)} cm, ${fmt(fit.rms_px, 2)} px over ${fit.marks.length} marks` +
-      (cal.fitting ? " (fitting…)" : "")
-    : (cal.fitting ? "fitting…" : "");
-  $("cal-error").textContent = cal.fitError ?? "";
-  // A note is {code, level, message} (or a plain message): warnings say what to add or change.
-  const notes = (fit ? fit.notes : []).map((note) => (typeof note === "string" ? { message: note } : note));
-  $("cal-notes").replaceChildren(...notes.map((note) => html("li", {
-    class: note.level === "warning" ? "warning" : null, "data-code": note.code ?? null, text: note.message,
-  })));
-  const size = imageWh();
-  const sizeNote = cal.frame && !(size instanceof Error) && (size[0] !== cal.frame.width || size[1] !== cal.frame.height)
-    ? ` · marks scaled to ${size[0]}×${size[1]} px` : "";
-  $("cal-frame-info").textContent = cal.frame
-    ? `${cal.frame.source}: ${cal.frame.width}×${cal.frame.height} px${sizeNote} · wheel: zoom at the pointer · ` +
-      "drag: pan, or move a mark · click: the tool"
-    : "no frame yet";
-  $("cal-saved").textContent = cal.unsaved ? "not saved: the registry still has the previous calibration"
-    : cal.saves ? "saved" : "";
-}
-
 function render() {
   renderFrame();
-  renderMarksTable();
-  renderMasks();
-  renderResult();
+  const size = imageWh();
+  const scaledTo = cal.frame && !(size instanceof Error) && (size[0] !== cal.frame.width || size[1] !== cal.frame.height)
+    ? size : null;
+  renderPanel(cal, residuals(), scaledTo);
   cal.renders += 1;
   document.body.dataset.calibrate = `${cal.cameraId}:${cal.fitsDone}/${cal.fitsWanted}${cal.fitting ? ":fitting" : ""}`;
 }
@@ -294,15 +228,11 @@ async function loadLatest() {
 
 // ----- editing
 
-function markById(id) {
-  return cal.marks.find((m) => m.id === Number(id)) ?? null;
-}
-
 function addMark(u, v) {
   const distance = Number($("cal-distance").value);
   if (!(distance > 0)) throw new Error("enter the distance of the next mark (m, > 0); the nadir tool sets distance 0");
   const mark = { id: cal.nextId++, ruler: $("cal-ruler").value.trim(), u, v, distance_m: distance, x_m: null, y_m: null };
-  cal.marks.push(mark);
+  cal.marks = [...cal.marks, mark];
   cal.selected = mark.id;
   const step = Number($("cal-step").value);
   if (step > 0) $("cal-distance").value = String(+(distance + step).toFixed(6));
@@ -311,9 +241,8 @@ function addMark(u, v) {
 
 function setNadir(u, v) {
   const nadir = cal.marks.find((m) => m.distance_m === 0);
-  if (nadir) Object.assign(nadir, { u, v });
-  else cal.marks.unshift({ id: cal.nextId++, ruler: "nadir", u, v, distance_m: 0, x_m: null, y_m: null });
-  cal.selected = (nadir ?? cal.marks[0]).id;
+  cal.selected = nadir ? nadir.id : cal.nextId++;
+  cal.marks = withNadir(cal.marks, u, v, cal.selected);
   return refit();
 }
 
@@ -323,31 +252,18 @@ function deleteMark(id) {
   return refit();
 }
 
-/** A typed change to a mark's ruler, distance or floor position; a bad value is refused, with why. */
 function editMark(id, field, text) {
-  const mark = markById(id);
-  if (!mark) return;
-  if (field === "ruler") {
-    mark.ruler = text.trim();
-    return refit();
-  }
-  const value = text.trim() === "" ? null : Number(text);
-  if (value !== null && !Number.isFinite(value)) throw new Error(`${field} must be a number`);
-  if (field === "distance_m") {
-    if (value === null || value < 0) {
-      render();
-      throw new Error(`mark ${cal.marks.indexOf(mark) + 1}: the distance must be a number ≥ 0 (m)`);
-    }
-    mark.distance_m = value;
-  } else {
-    mark[field] = value;
-    const other = field === "x_m" ? "y_m" : "x_m";
-    // A floor position needs both coordinates; the distance follows it once it has them.
-    if (value !== null && mark[other] === null) mark[other] = 0;
-    if (value === null) mark[other] = null;
-    if (mark.x_m !== null) mark.distance_m = Math.hypot(mark.x_m, mark.y_m);
+  try {
+    cal.marks = withEdit(cal.marks, Number(id), field, text);
+  } catch (error) {
+    render(); // the table shows the value it kept
+    throw error;
   }
   return refit();
+}
+
+function moveMark(id, u, v) {
+  cal.marks = cal.marks.map((m) => (m.id === id ? { ...m, u, v } : m));
 }
 
 function closeMask() {
@@ -472,11 +388,11 @@ function wire() {
       return true;
     },
     drag: (u, v) => {
-      Object.assign(markById(cal.selected), { u, v });
+      moveMark(cal.selected, u, v);
       renderFrame();
     },
     dragEnd: guarded((u, v) => {
-      Object.assign(markById(cal.selected), { u, v });
+      moveMark(cal.selected, u, v);
       return refit();
     }),
     view: () => cal.frame && renderFrame(),
