@@ -9,12 +9,12 @@
 // resolution of the same aspect ratio).
 
 import { api } from "./api.js";
+import { cameraRecord, marksCsvAt, marksFromCsv } from "./calibrate_io.js";
 import { calibrateOverlay } from "./calibrate_overlay.js";
 import { renderPanel } from "./calibrate_panel.js";
 import { fmt, html, svg } from "./dom.js";
 import { pixelToFloorPoint, scaledCamera } from "./geometry.js";
 import { withEdit, withNadir } from "./mark_edits.js";
-import { marksToCsv, parseMarksCsv } from "./marks_csv.js";
 import { rescalePoints } from "./masks.js";
 import { attachZoomPan } from "./zoom_pan.js";
 
@@ -318,49 +318,31 @@ async function importCsv(file) {
   if (!cal.frame) throw new Error("load the frame the marks were taken on first");
   const size = scalableTo(imageWh());
   if (size instanceof Error) throw size;
-  const marks = parseMarksCsv(await file.text(), file.name);
-  const uv = rescalePoints(marks.map((m) => [m.u, m.v]), size, frameWh());
-  cal.marks = marks.map((m, i) => ({ ...m, id: cal.nextId + i, u: uv[i][0], v: uv[i][1] }));
-  cal.nextId += marks.length;
-  cal.selected = null;
+  const marks = marksFromCsv(await file.text(), file.name, size, frameWh(), cal.nextId);
+  Object.assign(cal, { marks, nextId: cal.nextId + marks.length, selected: null });
   report(`${file.name}: ${marks.length} marks`);
   await refit();
 }
 
-/** The marks.csv text of the marks, in pixels of the image size. */
-function exportCsv() {
+function download() {
   if (!cal.frame) throw new Error("no marks to export: load a frame and click some");
   const size = scalableTo(imageWh());
   if (size instanceof Error) throw size;
-  const uv = rescalePoints(cal.marks.map((m) => [m.u, m.v]), frameWh(), size);
-  return marksToCsv(cal.marks.map((m, i) => ({ ...m, u: uv[i][0], v: uv[i][1] })));
-}
-
-function download() {
-  const text = exportCsv();
+  const text = marksCsvAt(cal.marks, frameWh(), size);
   const link = html("a", { href: URL.createObjectURL(new Blob([text], { type: "text/csv" })), download: `${cal.cameraId}-marks.csv` });
   cal.exported = text;
   link.click();
   setTimeout(() => URL.revokeObjectURL(link.href), 0);
 }
 
-/** The record Save writes: the fitted lens (or the saved one), the camera's site and pose, the masks. */
-function recordToSave() {
-  if (cal.marks.length && !cal.fit) {
-    throw new Error(`the marks give no calibration yet (${cal.fitError ?? "fitting"}); fix them, or delete them to save the masks alone`);
-  }
-  if (cal.fitting || cal.fitsDone < cal.fitsWanted) throw new Error("the fit is not finished yet");
-  const base = cal.fit ? cal.fit.camera : cal.camera;
-  if (!base) throw new Error(`camera ${cal.cameraId} is not in the registry and has no fit`);
-  const keep = Object.fromEntries(["site", "site_pose"].filter((k) => cal.camera?.[k] != null).map((k) => [k, cal.camera[k]]));
-  if (cal.frame && scalableTo(base.image_size) instanceof Error) throw scalableTo(base.image_size);
-  const masks = cal.frame ? cal.masks.map((points) => rescalePoints(points, frameWh(), base.image_size)) : (cal.camera?.masks_px ?? []);
-  return { ...base, ...keep, id: cal.cameraId, masks_px: masks };
-}
-
 async function save() {
   if (cal.drawing.length) throw new Error("close or drop the mask being drawn first (Enter or Escape)");
-  const saved = await api.putCamera(cal.cameraId, recordToSave(), $("cal-token").value.trim());
+  if (cal.fitting || cal.fitsDone < cal.fitsWanted) throw new Error("the fit is not finished yet");
+  const lensWh = (cal.fit?.camera ?? cal.camera)?.image_size;
+  if (cal.frame && lensWh && scalableTo(lensWh) instanceof Error) throw scalableTo(lensWh); // masks could not follow
+  const record = cameraRecord({ cameraId: cal.cameraId, saved: cal.camera, marks: cal.marks, fit: cal.fit,
+                                fitError: cal.fitError, masks: cal.frame ? cal.masks : null, frameWh: cal.frame ? frameWh() : null });
+  const saved = await api.putCamera(cal.cameraId, record, $("cal-token").value.trim());
   cal.camera = saved;
   cal.unsaved = false;
   cal.saves += 1;
