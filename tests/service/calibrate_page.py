@@ -131,3 +131,31 @@ def click_mark(driver: Any, uv: tuple[float, float]) -> dict[str, Any]:
     wait_for(lambda: len(cal_state(driver)["marks"]) == before + 1 or cal_state(driver)["statusIsError"],
              "the mark")
     return settled(driver)
+
+
+def import_marks(driver: Any, tmp_path: Path, csv_text: str, name: str = "marks.csv") -> dict[str, Any]:
+    from selenium.webdriver.common.by import By
+
+    path = tmp_path / name
+    path.write_text(csv_text, encoding="utf-8")
+    before = cal_state(driver)["fitsWanted"]
+    driver.find_element(By.ID, "cal-import").send_keys(str(path))
+    wait_for(lambda: cal_state(driver)["fitsWanted"] > before or cal_state(driver)["statusIsError"],
+             "the import")
+    return settled(driver)
+
+
+def edit_mark(driver: Any, index: int, field: str, text: str) -> dict[str, Any]:
+    """Type `text` into the marks table's `field` of mark `index` (0-based) and commit it."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.keys import Keys
+
+    mark_id = cal_state(driver)["marks"][index]["id"]
+    selector = f'#cal-marks input[data-mark-id="{mark_id}"][data-field="{field}"]'
+    field_input = driver.find_element(By.CSS_SELECTOR, selector)
+    before = cal_state(driver)["fitsWanted"]
+    field_input.send_keys(Keys.CONTROL, "a")  # select the old value (clear() would commit an empty one)
+    field_input.send_keys(text, Keys.ENTER)  # Enter commits the change
+    wait_for(lambda: cal_state(driver)["fitsWanted"] > before or cal_state(driver)["statusIsError"],
+             "the edit")
+    return settled(driver)
