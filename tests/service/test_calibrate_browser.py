@@ -227,6 +227,22 @@ def test_marks_are_moved_relabelled_deleted_and_imported(
     state = import_marks(driver, tmp_path, "ruler,u,v,distance_m\neast,,600,1\n", "broken.csv")
     assert state["statusIsError"] and state["status"] == "broken.csv line 2: u and v are required"
     assert len(state["marks"]) == len(simulated) - 2  # unchanged
+
+    # The page reads a marks.csv as `fishloc calibrate` does: comments, quoted labels, x, y alone.
+    (u0, v0), (u1, v1), (u2, v2) = simulated.uv_px[:3]
+    text = ("# the nadir, a label with a comma, a mark given by its floor position\n"
+            "ruler, u, v, distance_m, x_m, y_m\n"
+            f"nadir,{u0},{v0},0,,\n"
+            f'"east, tape 1",{u1},{v1},1.0,,\n'
+            "\n"
+            f"east,{u2},{v2},,2.0,0.1\n")
+    import_marks(driver, tmp_path, text, "tricky.csv")
+    python = parse_marks_csv(text)
+    page = cal_state(driver)["marks"]
+    assert [m["ruler"] for m in page] == list(python.ruler)
+    np.testing.assert_allclose([[m["u"], m["v"], m["distance_m"]] for m in page],
+                               np.column_stack([python.uv_px, python.distance_m]), rtol=0, atol=1e-12)
+    assert [[m["x_m"], m["y_m"]] for m in page] == [[None, None], [None, None], [2.0, 0.1]]
     assert registry_camera(server) == GUESS
     assert page_errors(driver) == []
 
