@@ -202,6 +202,10 @@ async function loadFrame(blob, source) {
   cal.masks = old ? cal.masks.map(carry) : savedMasks([width, height]);
   cal.frame = { url, width, height, source };
   cal.frames += 1;
+  if ($("cal-width").value === "" && $("cal-height").value === "") { // a new camera: calibrate at the frame's size
+    $("cal-width").value = String(width);
+    $("cal-height").value = String(height);
+  }
   cal.checks = [];
   const root = $("cal-frame");
   root.replaceChildren(svg("image", { href: url, x: -0.5, y: -0.5, width, height, preserveAspectRatio: "none" }));
