@@ -438,3 +438,29 @@ def test_a_tilted_camera_is_fitted_and_checked_with_its_tilt(
                                rtol=0, atol=0.001)
     np.testing.assert_allclose(check["xy"], [6.0, 2.0], atol=0.02)
     assert page_errors(driver) == []
+
+
+def test_a_camera_not_in_the_registry_is_made_by_the_calibration(
+    driver: Any, server: LiveServer, frame_path: Path, tmp_path: Path,
+) -> None:
+    from selenium.webdriver.common.by import By
+
+    open_calibrate(driver, server.url, "new-cam")
+    assert httpx.get(f"{server.url}/v1/cameras/new-cam").status_code == 404
+    state = upload_frame(driver, frame_path)
+    assert state["camera"] is None
+    assert state["error"] == "no marks yet: click the nadir, then marks along a tape"
+    size = [driver.find_element(By.ID, f"cal-{side}").get_attribute("value") for side in ("width", "height")]
+    assert size == ["1600", "1200"]  # the frame's, with no camera to take it from
+    import_marks(driver, tmp_path, marks_to_csv(FOUR_TAPES))
+    assert settled(driver)["error"] == "enter the altitude of the lens above the floor (m, > 0)"
+    type_into(driver, "cal-altitude", "3")
+    driver.find_element(By.ID, "cal-rms").click()  # the altitude is committed when it loses the focus
+    state = wait_for(lambda: (s := settled(driver))["fit"] and s, "the fit")
+    driver.find_element(By.ID, "cal-save").click()
+    wait_for(lambda: cal_state(driver)["saves"] == 1, "the save")
+    saved = httpx.get(f"{server.url}/v1/cameras/new-cam").json()
+    assert {key: saved[key] for key in state["fit"]["camera"]} == state["fit"]["camera"]
+    assert saved["id"] == "new-cam" and "site_pose" not in saved
+    assert floor_error_at_m(load_camera(saved), 8.0) < 0.01
+    assert "new-cam" in [camera["id"] for camera in httpx.get(f"{server.url}/v1/cameras").json()["cameras"]]
