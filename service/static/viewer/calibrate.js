@@ -120,10 +120,11 @@ async function fitOnce() {
   }
 }
 
-/** Fit again after a change; one request at a time, the last change always fitted. */
-async function refit() {
+/** Fit again after a change (`changed`: to what Save would write); one request at a time, the
+ *  last change always fitted. */
+async function refit({ changed = true } = {}) {
   cal.fitsWanted += 1;
-  cal.unsaved = true;
+  cal.unsaved ||= changed;
   render();
   if (cal.fitting) return;
   cal.fitting = true;
@@ -210,7 +211,7 @@ async function loadFrame(blob, source) {
   const root = $("cal-frame");
   root.replaceChildren(svg("image", { href: url, x: -0.5, y: -0.5, width, height, preserveAspectRatio: "none" }));
   zoom.setFrame(width, height);
-  await refit();
+  await refit({ changed: false });
 }
 
 /** The saved camera's masks in pixels of a frame `wh` ([] when it has none or another aspect ratio). */
@@ -393,7 +394,7 @@ function wire() {
   $("cal-one").addEventListener("click", () => zoom.oneToOne());
   $("cal-rings").addEventListener("change", () => renderFrame());
   for (const id of ["cal-altitude", "cal-width", "cal-height", "cal-coefficients", "cal-fit-pp", "cal-fit-tilt"]) {
-    $(id).addEventListener("change", guarded(refit));
+    $(id).addEventListener("change", guarded(() => refit()));
   }
   for (const input of document.querySelectorAll('input[name="cal-tool"]')) {
     input.addEventListener("change", () => { $("cal-hint").textContent = HINTS[tool()]; });
