@@ -29,8 +29,8 @@ export function attachZoomPan(root, handlers) {
     const point = new DOMPoint(u, v).matrixTransform(root.getScreenCTM());
     return [point.x, point.y];
   };
-  /** Screen pixels per frame pixel at the present zoom. */
-  const scale = () => root.getScreenCTM().a;
+  /** Screen pixels per frame pixel at the present zoom (1 while the drawing is hidden). */
+  const scale = () => root.getScreenCTM()?.a || 1;
 
   function whole() {
     box = { x: -0.5, y: -0.5, w: frame.width, h: frame.height };
