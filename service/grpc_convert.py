@@ -113,6 +113,10 @@ def camera_to_message(camera: FisheyeCamera) -> pb.Camera:
         message.max_theta_deg = camera.max_theta_deg
     if "site_pose" in record:
         message.site_pose.CopyFrom(pb.SitePose(**record["site_pose"]))
+    if camera.tilt_deg is not None:
+        message.tilt_deg.CopyFrom(pb.Point(x=camera.tilt_deg[0], y=camera.tilt_deg[1]))
+    for polygon in camera.masks_px or []:
+        message.masks_px.append(pb.Polygon(points=[pb.Point(x=u, y=v) for u, v in polygon]))
     return message
 
 
@@ -129,6 +133,11 @@ def message_to_camera(message: pb.Camera) -> FisheyeCamera:
     if message.HasField("site_pose"):
         pose = message.site_pose
         record["site_pose"] = {"x_m": pose.x_m, "y_m": pose.y_m, "yaw_deg": pose.yaw_deg}
+    if message.HasField("tilt_deg"):
+        record["tilt_deg"] = [message.tilt_deg.x, message.tilt_deg.y]
+    if message.masks_px:
+        record["masks_px"] = [[[point.x, point.y] for point in polygon.points]
+                              for polygon in message.masks_px]
     return camera_from_dict(record)
 
 

@@ -9,7 +9,9 @@ server does not go on reading (and discarding) the rest of a body it has already
 from __future__ import annotations
 
 import asyncio
+import json
 from dataclasses import dataclass
+from typing import Any
 
 from fastapi import Request
 from starlette.requests import ClientDisconnect
@@ -33,6 +35,18 @@ class BodyLimits:
 
 def _too_large(message: str) -> ApiError:
     return ApiError(413, "payload_too_large", message, headers=CLOSE)
+
+
+async def read_json(request: Request, limits: BodyLimits, what: str) -> Any:
+    """The body parsed as JSON, or ApiError 400 `bad_json` naming `what` the body should have been
+    (and the errors of read_body)."""
+    body = await read_body(request, limits)
+    try:
+        return json.loads(body)
+    except ValueError as error:  # JSONDecodeError, UnicodeDecodeError, an int of too many digits
+        raise ApiError(400, "bad_json", f"the body is not JSON: {error}") from None
+    except RecursionError:
+        raise ApiError(400, "bad_json", f"the body is not {what}: JSON nested too deeply") from None
 
 
 async def read_body(request: Request, limits: BodyLimits) -> bytes:

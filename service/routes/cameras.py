@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from typing import Any
 
 from fastapi import APIRouter, Path, Request, Response, status
@@ -12,7 +11,7 @@ from fisheye import CalibrationError, FisheyeCamera, camera_to_dict
 from fisheye.camera import CAMERA_ID_PATTERN
 from service.dependencies import State, WriteAccess
 from service.errors import ApiError
-from service.request_body import BodyLimits, read_body
+from service.request_body import BodyLimits, read_json
 from service.schemas import CameraList, error_responses
 
 router = APIRouter(tags=["cameras"])
@@ -62,13 +61,8 @@ async def get_camera(state: State, camera_id: str = CameraId) -> dict[str, Any]:
 )
 async def put_camera(request: Request, response: Response, state: State,
                      camera_id: str = CameraId) -> dict[str, Any]:
-    body = await read_body(request, BodyLimits(_MAX_RECORD_BYTES, state.settings.body_timeout_s))
-    try:
-        record = json.loads(body)
-    except ValueError as error:  # JSONDecodeError, UnicodeDecodeError, an int of too many digits
-        raise ApiError(400, "bad_json", f"the body is not JSON: {error}") from None
-    except RecursionError:
-        raise ApiError(400, "bad_json", "the body is not a camera record: JSON nested too deeply") from None
+    record = await read_json(request, BodyLimits(_MAX_RECORD_BYTES, state.settings.body_timeout_s),
+                             "a camera record")
     if not isinstance(record, dict):
         raise ApiError(422, "invalid_camera", "the body must be a JSON object (a camera record)")
     try:
