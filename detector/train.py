@@ -82,6 +82,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     polar.add_argument("--zoom", type=float, nargs="+", default=[1.0], metavar="SCALE",
                        help="strip radii (multiples of the served one) drawn per sample, e.g. 0.8 1 1.25 "
                             "(each scale caches its own strips: memory grows with the count)")
+    polar.add_argument("--crop", type=int, default=0, metavar="COLUMNS",
+                       help="train on strip windows of this many columns (a multiple of 32) around "
+                            "the people, a fraction of the strip's cost per sample (default: whole strips)")
     polar.add_argument("--distill", type=float, default=None, help="λ of the COCO distillation (default 1.0)")
     polar.add_argument("--checkpoint-every", type=float, default=None,
                        help="seconds between checkpoints to OUT/last.pt (default 180)")
@@ -147,7 +150,7 @@ def yolox_view(args: argparse.Namespace) -> tuple[YoloxDetectorConfig, StripAugm
     strip = {} if args.strip is None else dict(zip(("input_size", "polar_width", "polar_overlap"),
                                                    args.strip, strict=True))
     return (PolarDetectorConfig(**strip, inner_fraction=args.inner_head),
-            StripAugment(radius_scales=tuple(args.zoom)))
+            StripAugment(radius_scales=tuple(args.zoom), crop_width=args.crop))
 
 
 def initial_network(args: argparse.Namespace, model_config: YoloxDetectorConfig

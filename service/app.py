@@ -13,7 +13,7 @@ from fastapi.middleware.cors import CORSMiddleware
 from service.dependencies import ServiceState
 from service.errors import install_error_handlers
 from service.middleware import RequestContextMiddleware
-from service.routes import calibrations, cameras, detect, health, latest, metrics, model, viewer
+from service.routes import calibrations, cameras, detect, docs, health, latest, metrics, model, viewer
 
 log = logging.getLogger(__name__)
 
@@ -36,11 +36,11 @@ def create_app(state: ServiceState, warm_up: bool = True) -> FastAPI:
 
     app = FastAPI(
         title="FishLoc", version="1", description=DESCRIPTION, lifespan=lifespan,
-        docs_url="/docs", redoc_url=None,
+        docs_url=None, redoc_url=None,  # /docs: service.routes.docs, assets from the package
     )
     app.state.fishloc = state
     install_error_handlers(app)
-    for module in (health, model, cameras, calibrations, detect, latest, metrics, viewer):
+    for module in (health, model, cameras, calibrations, detect, latest, metrics, viewer, docs):
         app.include_router(module.router)
     if state.settings.cors_origins:  # CORS stays off (no CORS headers at all) unless configured
         app.add_middleware(

@@ -60,10 +60,15 @@ class StripAugment:
     # Zoom: the strip's top row at this multiple of the served radius (people look smaller above
     # 1, larger below); one is drawn per sample. Every scale caches its own strips.
     radius_scales: tuple[float, ...] = (1.0,)
+    # > 0: train on windows of this many columns (a multiple of 32), centred near a random label:
+    # the network is convolutional, and a window costs a fraction of the strip's forward pass.
+    crop_width: int = 0
 
     def __post_init__(self) -> None:
         if not self.radius_scales or min(self.radius_scales) <= 0:
             raise ValueError(f"radius_scales must be positive, got {self.radius_scales}")
+        if self.crop_width < 0 or self.crop_width % 32:
+            raise ValueError(f"crop_width must be 0 or a positive multiple of 32, got {self.crop_width}")
 
     @classmethod
     def none(cls) -> StripAugment:
@@ -99,6 +104,29 @@ def label_copies(xyxy: FloatArray, width: int, strip_wh: tuple[int, int]
     source = np.tile(np.arange(len(xyxy)), 2)
     moved = np.repeat([0.0, float(width)], len(xyxy))
     return clipped[keep], source[keep], moved[keep]
+
+
+def crop_window(image: NDArray[np.uint8], labels: FloatArray, feet: FloatArray, width: int,
+                rng: np.random.Generator) -> tuple[NDArray[np.uint8], FloatArray, FloatArray]:
+    """A window of `width` columns of a strip (H, W, 3), centred near a random label when there is
+    one, with the labels (N, 4) and feet (N, 3) that lie in it (kept as `label_copies` keeps them)."""
+    strip_w = image.shape[1]
+    if width >= strip_w:
+        return image, labels, feet
+    if len(labels) and rng.random() < 0.9:
+        pick = labels[int(rng.integers(len(labels)))]
+        centre = (pick[0] + pick[2]) / 2 + rng.uniform(-0.4, 0.4) * width
+    else:
+        centre = rng.uniform(0, strip_w)
+    x0 = int(np.clip(round(centre - width / 2), 0, strip_w - width))
+    shifted = labels - np.array([x0, 0.0, x0, 0.0])
+    window = np.ascontiguousarray(image[:, x0:x0 + width])
+    if len(shifted) == 0:
+        return window, shifted, feet
+    kept, source, moved = label_copies(shifted, strip_w * 4, (width, image.shape[0]))  # no seam copies
+    kept_feet = feet[source].copy()
+    kept_feet[:, 0] += moved - x0
+    return window, kept, kept_feet
 
 
 def place_labels(xyxy: FloatArray, width: int, strip_wh: tuple[int, int]) -> FloatArray:
@@ -266,6 +294,8 @@ class PolarStripDataset:
             x1, y1, x2, y2 = labels.T
             labels = np.stack([right - x2, y1, right - x1, y2], axis=1)
             feet[:, 0] = right - feet[:, 0]
+        if self.augment.crop_width:
+            image, labels, feet = crop_window(image, labels, feet, self.augment.crop_width, rng)
         image = photometric(image, self.augment, rng)
         edge = np.array([EDGE_TO_CENTRE_PX, EDGE_TO_CENTRE_PX, 0.0])
         return StripSample(image, labels + EDGE_TO_CENTRE_PX, feet + edge)

@@ -8,13 +8,13 @@ Content-Security-Policy forbids any other origin, so it works on a closed networ
 from __future__ import annotations
 
 import re
-from functools import cache
 from pathlib import Path
 
 from fastapi import APIRouter
 from fastapi.responses import Response
 
 from service.errors import ApiError
+from service.packaged_files import PackagedFiles
 
 router = APIRouter(include_in_schema=False)
 
@@ -26,18 +26,12 @@ CONTENT_SECURITY_POLICY = (
     "default-src 'self'; img-src 'self' blob: data:; style-src 'self'; script-src 'self'; "
     "connect-src 'self'; object-src 'none'; base-uri 'none'; frame-ancestors 'none'"
 )
-_HEADERS = {"Content-Security-Policy": CONTENT_SECURITY_POLICY, "X-Content-Type-Options": "nosniff",
-            "Cache-Control": "no-cache"}
-
-
-@cache
-def _read_asset(name: str) -> bytes:
-    return (ASSETS_DIR / name).read_bytes()
+_FILES = PackagedFiles(ASSETS_DIR, CONTENT_SECURITY_POLICY)
 
 
 @router.get("/", response_class=Response)
 async def index() -> Response:
-    return Response(_read_asset("index.html"), media_type="text/html; charset=utf-8", headers=_HEADERS)
+    return _FILES.response("index.html", "text/html; charset=utf-8")
 
 
 @router.get("/site", response_class=Response)
@@ -48,6 +42,6 @@ async def site_map() -> Response:
 @router.get("/viewer/{name}", response_class=Response)
 async def asset(name: str) -> Response:
     match = _ASSET_NAME.match(name)
-    if match is None or not (ASSETS_DIR / name).is_file():
+    if match is None or not _FILES.has(name):
         raise ApiError(404, "not_found", f"no viewer asset {name!r}")
-    return Response(_read_asset(name), media_type=_MEDIA_TYPES[match.group(1)], headers=_HEADERS)
+    return _FILES.response(name, _MEDIA_TYPES[match.group(1)])

@@ -17,7 +17,7 @@ from detector.checkpoint import Checkpoint, ModelInfo, load_checkpoint, save_che
 from detector.data.readers import read_dataset
 from detector.metrics import EvalFrame, compute_metrics
 from detector.yolox.finetune import FinetuneConfig, Finetuner
-from detector.yolox.foot import foot_from_offsets, foot_loss, strip_feet
+from detector.yolox.foot import MAX_METRES_PER_PX, foot_from_offsets, foot_loss, strip_feet
 from detector.yolox.network import YoloxNano
 from detector.yolox.polar import PolarContract, PolarDetectorConfig, init_from_pretrained
 from detector.yolox.strips import PolarStripDataset, StripAugment, collate_feet, frame_strip, training_info
@@ -93,19 +93,40 @@ def test_rolled_and_flipped_samples_keep_each_foot_with_its_box(toy_dataset: Cal
     assert feet is not None and feet[0].shape == (len(dataset[0].labels_xyxy), 3)
 
 
-@pytest.mark.parametrize(("offsets", "expected"), [
-    ([[0.0, 0.0]], 0.0 + 2.0 * 0.5),  # box side: 2 px short of the target at 0.5 m/px
-    ([[0.0, 0.2]], 0.0),  # 0.2 of the 10 px height below the bottom side: on target
-    ([[0.1, 0.2]], 0.4 * 0.5),  # 0.4 px to the side
+@pytest.mark.parametrize(("offsets", "metres_per_px", "expected"), [
+    ([[0.0, 0.0]], 0.05, 2.0 * 0.05),  # box side: 2 px short of the target
+    ([[0.0, 0.2]], 0.05, 0.0),  # 0.2 of the 10 px height below the bottom side: on target
+    ([[0.1, 0.2]], 0.05, 0.4 * 0.05),  # 0.4 px to the side
+    ([[0.0, 0.0]], 0.5, 2.0 * MAX_METRES_PER_PX),  # near the horizon the weight stops at the cap
 ])
-def test_foot_loss_counts_metres(offsets: list[list[float]], expected: float) -> None:
+def test_foot_loss_counts_metres(offsets: list[list[float]], metres_per_px: float, expected: float) -> None:
     box = torch.tensor([[10.0, 0.0, 14.0, 10.0]])  # xyxy, bottom side at y = 10
-    target = torch.tensor([[12.0, 12.0, 0.5]])  # foot x, y px, metres per px
+    target = torch.tensor([[12.0, 12.0, metres_per_px]])  # foot x, y px, metres per px
     total, count = foot_loss(torch.tensor(offsets), box, target)
     assert count == 1 and total.item() == pytest.approx(expected, abs=1e-6)
     assert foot_loss(torch.tensor(offsets), box, torch.full((1, 3), float("nan")))[1] == 0
     torch.testing.assert_close(foot_from_offsets(torch.zeros(1, 2), torch.tensor([[12.0, 5.0, 4.0, 10.0]])),
                                torch.tensor([[12.0, 10.0]]))
+
+
+def test_crop_windows_keep_their_people_and_feet(toy_dataset: Callable[..., Path]) -> None:
+    frames = read_dataset(toy_dataset(count=2, size=128, people=4))
+    whole = PolarStripDataset(frames, CONFIG, StripAugment.none(), seed=2)
+    windows = dataclasses.replace(StripAugment.none(), crop_width=96)
+    cropped = PolarStripDataset(frames, CONFIG, windows, seed=2)
+    for index in range(2):
+        full, window = whole[index], cropped[index]
+        assert window.image.shape == (64, 96, 3) and len(window.labels_xyxy) >= 1
+        # every kept label is a label of the whole strip moved by the window's start, with its foot
+        starts = {round(float(x0), 6) for x0 in full.labels_xyxy[:, 0] - window.labels_xyxy[0, 0]}
+        x0 = next(x for x in starts if np.any(np.all(np.isclose(full.labels_xyxy - [x, 0, x, 0],
+                                                                  window.labels_xyxy[0]), axis=1)))
+        for label, foot in zip(window.labels_xyxy, window.feet, strict=True):
+            match = np.all(np.isclose(full.labels_xyxy - [x0, 0, x0, 0], label), axis=1)
+            if match.any():  # labels the window's edge clips differ from their whole-strip box
+                np.testing.assert_allclose(foot, full.feet[match][0] - [x0, 0, 0])
+        start = round(x0)
+        np.testing.assert_array_equal(window.image, full.image[:, start:start + 96])
 
 
 def test_training_the_branch_alone_moves_the_feet_not_the_boxes(

@@ -42,8 +42,9 @@ def unavailable(reason: str) -> None:
 
 
 @contextmanager
-def chromium_driver() -> Iterator[Any]:
-    """A Selenium WebDriver over a headless Chromium with a fresh profile; quit on exit."""
+def chromium_driver(extra_flags: tuple[str, ...] = ()) -> Iterator[Any]:
+    """A Selenium WebDriver over a headless Chromium with a fresh profile (and `extra_flags`); quit
+    on exit."""
     try:
         from selenium import webdriver
         from selenium.webdriver.chrome.service import Service
@@ -57,7 +58,7 @@ def chromium_driver() -> Iterator[Any]:
     with tempfile.TemporaryDirectory(prefix="fishloc-chromium-") as profile:
         options = webdriver.ChromeOptions()
         options.binary_location = chromium
-        for flag in (*CHROMIUM_FLAGS, f"--user-data-dir={profile}"):
+        for flag in (*CHROMIUM_FLAGS, *extra_flags, f"--user-data-dir={profile}"):
             options.add_argument(flag)
         options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
         driver = webdriver.Chrome(options=options, service=Service(executable_path=driver_path))

@@ -26,11 +26,26 @@ async function getJson(path) {
   return response.json();
 }
 
+async function sendJson(method, path, body, token = "") {
+  const headers = { "Content-Type": "application/json" };
+  if (token) headers.Authorization = `Bearer ${token}`;
+  const response = await fetch(path, { method, headers, body: JSON.stringify(body), cache: "no-store" });
+  if (!response.ok) throw await failure(response);
+  return response.json();
+}
+
 const cameraPath = (id) => `/v1/cameras/${encodeURIComponent(id)}`;
 
 export const api = {
   model: () => getJson("/v1/model"),
   cameras: async () => (await getJson("/v1/cameras")).cameras,
+  camera: (id) => getJson(cameraPath(id)),
+
+  /** Create or replace a camera record; `token` for a service whose writes need one. */
+  putCamera: (id, record, token = "") => sendJson("PUT", cameraPath(id), record, token),
+
+  /** Fit a camera from ruler marks without saving it (POST /v1/calibrations/fit). */
+  fitCalibration: (body, token = "") => sendJson("POST", "/v1/calibrations/fit", body, token),
 
   /** The latest frame's record of a camera, or null when it has had none. */
   async latest(cameraId) {

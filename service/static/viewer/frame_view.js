@@ -7,7 +7,7 @@ import { floorPointToPixel, floorRingPixels, fovRadiusM, scaledCamera, thetaMaxD
 const RING_LABEL_PHI = -Math.PI / 4; // ring labels sit towards the lower right of the nadir
 
 /** Floor rings every metre out to the field of view, the nadir, the x/y axes and the θmax circle. */
-function calibrationLayer(camera, frameWh, fontPx) {
+export function calibrationLayer(camera, frameWh, fontPx) {
   const scaled = scaledCamera(camera, frameWh);
   const layer = svg("g", { class: "calibration" });
   const [u0, v0] = scaled.principal_point;

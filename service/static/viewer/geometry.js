@@ -1,7 +1,8 @@
-// Camera geometry for drawing: the forward projection floor (x, y) m -> frame pixel, as in
-// fisheye/camera.py (FisheyeCamera.scaled_to, floor_to_pixels) and DESIGN.md's conventions.
-// Pixels: u right, v down, centres at integers. Floor frame: origin at the nadir, x towards image
-// right, y towards image top. r(θ) = k1·θ + k2·θ³ + ... (Kannala–Brandt).
+// Camera geometry for drawing and checking: floor (x, y) m <-> frame pixel, as in fisheye/camera.py
+// (FisheyeCamera.scaled_to, floor_to_pixels, pixels_to_floor), fisheye/lens.py and DESIGN.md's
+// conventions. Pixels: u right, v down, centres at integers. Floor frame: origin at the nadir, x
+// towards image right, y towards image top, z up. r(θ) = k1·θ + k2·θ³ + ... (Kannala–Brandt). A
+// camera with `tilt_deg` [a, b] turns each lens ray by a about x, then by b about y.
 
 export const DEFAULT_MAX_THETA_DEG = 90;
 export const FOV_LIMIT_DEG = 85; // beyond this the floor runs off towards the horizon
@@ -41,17 +42,83 @@ export function scaledCamera(camera, resolutionWh) {
   };
 }
 
+/** dr/dθ of the lens polynomial. */
+function radiusDerivative(thetaRad, kb) {
+  const t2 = thetaRad * thetaRad;
+  let slope = 0;
+  for (let i = kb.length - 1; i >= 0; i -= 1) slope = slope * t2 + (2 * i + 1) * kb[i];
+  return slope;
+}
+
+/** θ (rad) with r(θ) = radius, or null outside [0, r(θmax)]: Newton kept inside a shrinking
+ *  bracket, finished by bisection (as fisheye/lens.py radius_to_theta). */
+export function radiusToTheta(radius, kb, thetaMaxRad) {
+  const radiusMax = thetaToRadius(thetaMaxRad, kb);
+  if (!(radius >= 0 && radius <= radiusMax * (1 + 1e-12))) return null;
+  const goal = Math.min(radius, radiusMax);
+  let [lo, hi] = [0, thetaMaxRad];
+  let theta = Math.min(Math.max(goal / kb[0], 0), thetaMaxRad);
+  for (let i = 0; i < 30; i += 1) {
+    const residual = thetaToRadius(theta, kb) - goal;
+    if (residual === 0) return theta;
+    if (residual < 0) lo = theta; else hi = theta;
+    let next = theta - residual / radiusDerivative(theta, kb);
+    if (!Number.isFinite(next) || next < lo || next > hi) next = 0.5 * (lo + hi);
+    if (Math.abs(next - theta) < 1e-12) return next;
+    theta = next;
+  }
+  for (let i = 0; i < 80; i += 1) {
+    const middle = 0.5 * (lo + hi);
+    if (thetaToRadius(middle, kb) < goal) lo = middle; else hi = middle;
+  }
+  return 0.5 * (lo + hi);
+}
+
+/** The rotation lens ray -> floor frame of a camera's `tilt_deg` [a, b]: R_y(b)·R_x(a), rows. */
+function tiltMatrix(camera) {
+  const [a, b] = (camera.tilt_deg ?? [0, 0]).map((angle) => angle * deg);
+  const [ca, sa, cb, sb] = [Math.cos(a), Math.sin(a), Math.cos(b), Math.sin(b)];
+  return [[cb, sb * sa, sb * ca], [0, ca, -sa], [-sb, cb * sa, cb * ca]];
+}
+
 /** One floor point (x, y) m -> [u, v] px of a camera already scaled to the frame; null beyond θmax. */
 export function floorPointToPixel(camera, x, y) {
-  const d = Math.hypot(x, y);
-  const theta = Math.atan2(d, camera.altitude_m);
+  const ray = [x, y, -camera.altitude_m];
+  const m = tiltMatrix(camera);
+  // Floor-frame ray -> lens ray: the transpose of the tilt rotation.
+  const [lx, ly, lz] = [0, 1, 2].map((j) => m[0][j] * ray[0] + m[1][j] * ray[1] + m[2][j] * ray[2]);
+  const horizontal = Math.hypot(lx, ly);
+  const theta = Math.atan2(horizontal, -lz);
   if (theta > thetaMaxDeg(camera) * deg + 1e-12) return null;
   const r = thetaToRadius(theta, camera.kb);
-  const cosPhi = d > 0 ? x / d : 1;
-  const sinPhi = d > 0 ? y / d : 0;
+  const cosPhi = horizontal > 0 ? lx / horizontal : 1;
+  const sinPhi = horizontal > 0 ? ly / horizontal : 0;
   const [u0, v0] = camera.principal_point;
   const [fx, fy] = camera.focal_px;
   return [u0 + fx * r * cosPhi, v0 - fy * r * sinPhi];
+}
+
+/** One pixel [u, v] of a camera already scaled to the frame -> floor [x, y] m; null where its ray
+ *  leaves the calibrated field or misses the floor. */
+export function pixelToFloorPoint(camera, u, v) {
+  const [u0, v0] = camera.principal_point;
+  const [fx, fy] = camera.focal_px;
+  const xn = (u - u0) / fx;
+  const yn = -(v - v0) / fy;
+  const theta = radiusToTheta(Math.hypot(xn, yn), camera.kb, thetaMaxDeg(camera) * deg);
+  if (theta === null) return null;
+  const phi = Math.atan2(yn, xn);
+  const lens = [Math.sin(theta) * Math.cos(phi), Math.sin(theta) * Math.sin(phi), -Math.cos(theta)];
+  const [rx, ry, rz] = tiltMatrix(camera).map((row) => row[0] * lens[0] + row[1] * lens[1] + row[2] * lens[2]);
+  if (!(rz < 0)) return null;
+  const t = camera.altitude_m / -rz;
+  return [t * rx, t * ry];
+}
+
+/** Pixels [[u, v], ...] in frames of `resolutionWh` -> [[x, y] | null, ...] m on the floor. */
+export function pixelsToFloor(camera, resolutionWh, points) {
+  const scaled = scaledCamera(camera, resolutionWh);
+  return points.map(([u, v]) => pixelToFloorPoint(scaled, u, v));
 }
 
 /** Floor points [[x, y], ...] m -> [[u, v] | null, ...] px in frames of `resolutionWh`. */

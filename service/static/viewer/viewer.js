@@ -1,13 +1,15 @@
 // The FishLoc viewer: camera list, a camera's frame with detections beside its floor map, and the
-// site map of every camera with a site pose. Routes: #/camera/<id> and #/site.
+// site map of every camera with a site pose, and a camera's Calibrate mode (calibrate.js). Routes:
+// #/camera/<id>, #/calibrate/<id> and #/site.
 //
 // window.fishlocViewer exposes the shown state and the projection for tests and for the console.
 
 import { api } from "./api.js";
+import { calibrateState, closeCalibrate, openCalibrate } from "./calibrate.js";
 import { fmt, fmtPair, html } from "./dom.js";
 import { drawMap, squareBounds } from "./floor_map.js";
 import { drawFrame } from "./frame_view.js";
-import { floorToPixels, floorToSite, fovRadiusM } from "./geometry.js";
+import { floorToPixels, floorToSite, fovRadiusM, pixelsToFloor } from "./geometry.js";
 
 const POLL_MS = 1000;
 const $ = (id) => document.getElementById(id);
@@ -139,6 +141,7 @@ async function openCamera(id) {
     return;
   }
   $("camera-title").textContent = `${camera.id} · ${fmt(camera.altitude_m, 2)} m`;
+  $("calibrate-link").href = `#/calibrate/${encodeURIComponent(camera.id)}`;
   if (state.shown?.cameraId !== id) {
     if (state.shown) URL.revokeObjectURL(state.shown.frameUrl);
     state.shown = null;
@@ -202,7 +205,7 @@ async function openSite() {
 // ----- navigation
 
 function renderCameraList() {
-  const active = state.view?.kind === "camera" ? state.view.id : null;
+  const active = ["camera", "calibrate"].includes(state.view?.kind) ? state.view.id : null;
   $("camera-list").replaceChildren(...state.cameras.map((camera) => html("li", {}, [
     html("a", { href: `#/camera/${encodeURIComponent(camera.id)}`, class: camera.id === active ? "active" : null,
                 "data-camera": camera.id }, [camera.id, html("small", { text: camera.site_pose ? "site" : "" })]),
@@ -214,6 +217,7 @@ function parseHash() {
   const hash = decodeURIComponent(location.hash.replace(/^#\/?/, ""));
   if (hash === "site") return { kind: "site" };
   if (hash.startsWith("camera/")) return { kind: "camera", id: hash.slice("camera/".length) };
+  if (hash.startsWith("calibrate/")) return { kind: "calibrate", id: hash.slice("calibrate/".length) };
   return state.cameras.length ? { kind: "camera", id: state.cameras[0].id } : { kind: "none" };
 }
 
@@ -222,7 +226,14 @@ async function route() {
   state.view = parseHash();
   renderCameraList();
   setStatus("");
-  if (state.view.kind === "camera") await openCamera(state.view.id);
+  const calibrating = state.view.kind === "calibrate";
+  if (!calibrating) closeCalibrate();
+  $("people").hidden = calibrating;
+  if (calibrating) {
+    $("camera-view").hidden = true;
+    $("site-view").hidden = true;
+    await openCalibrate(state.view.id, state.cameras, setStatus);
+  } else if (state.view.kind === "camera") await openCamera(state.view.id);
   else if (state.view.kind === "site") await openSite();
   else setStatus("the registry has no cameras: add one with PUT /v1/cameras/{id}");
 }
@@ -270,5 +281,5 @@ async function main() {
   document.body.dataset.state = "ready";
 }
 
-window.fishlocViewer = { state, floorToPixels, fovRadiusM };
+window.fishlocViewer = { state, calibrate: calibrateState, floorToPixels, pixelsToFloor, fovRadiusM };
 main();

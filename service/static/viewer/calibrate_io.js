@@ -1,0 +1,35 @@
+// What the Calibrate mode reads and writes, as pure functions: marks.csv at the camera's image size
+// (the page keeps marks in frame pixels), and the camera record that Save puts in the registry.
+
+import { marksToCsv, parseMarksCsv } from "./marks_csv.js";
+import { rescalePoints } from "./masks.js";
+
+/** The marks.csv text of marks in pixels of a `frameWh` frame, written at `imageWh`. */
+export function marksCsvAt(marks, frameWh, imageWh) {
+  const uv = rescalePoints(marks.map((m) => [m.u, m.v]), frameWh, imageWh);
+  return marksToCsv(marks.map((m, i) => ({ ...m, u: uv[i][0], v: uv[i][1] })));
+}
+
+/** Marks of a marks.csv at `imageWh`, in pixels of a `frameWh` frame, with ids from `firstId`. */
+export function marksFromCsv(text, source, imageWh, frameWh, firstId) {
+  const marks = parseMarksCsv(text, source);
+  const uv = rescalePoints(marks.map((m) => [m.u, m.v]), imageWh, frameWh);
+  return marks.map((m, i) => ({ ...m, id: firstId + i, u: uv[i][0], v: uv[i][1] }));
+}
+
+/**
+ * The record Save writes: the fitted lens (or, with no marks, the saved one), the saved camera's
+ * `site` and `site_pose`, and `masks` (frame px of a `frameWh` frame; null keeps the saved ones).
+ * Throws an Error when the marks give no camera to save.
+ */
+export function cameraRecord({ cameraId, saved, marks, fit, fitError, masks, frameWh }) {
+  if (marks.length && !fit) {
+    throw new Error(`the marks give no calibration yet (${fitError ?? "fitting"}); fix them, or delete them to ` +
+                    "save the masks alone");
+  }
+  const lens = fit ? fit.camera : saved;
+  if (!lens) throw new Error(`camera ${cameraId} is not in the registry and has no fit`);
+  const place = Object.fromEntries(["site", "site_pose"].filter((k) => saved?.[k] != null).map((k) => [k, saved[k]]));
+  const masksPx = masks === null ? (saved?.masks_px ?? []) : masks.map((points) => rescalePoints(points, frameWh, lens.image_size));
+  return { ...lens, ...place, id: cameraId, masks_px: masksPx };
+}
