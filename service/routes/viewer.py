@@ -36,7 +36,7 @@ async def index() -> Response:
 
 @router.get("/site", response_class=Response)
 async def site_map() -> Response:
-    return Response(_read_asset("site.html"), media_type="text/html; charset=utf-8", headers=_HEADERS)
+    return _FILES.response("site.html", "text/html; charset=utf-8")
 
 
 @router.get("/viewer/{name}", response_class=Response)
