@@ -28,6 +28,8 @@ from service.track_scoring import GATE_M, score_sequence
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.description = ("Play a site sequence (fishloc synth --sequence) through a server, one run in this "
+                          "process, or the tracker alone, and score its tracks, zone counts and line counts.")
     parser.add_argument("--tracks", action="store_true", required=True,
                         help="score a site sequence's tracks (fishloc synth --sequence)")
     parser.add_argument("--data", required=True, type=Path, help="the sequence's annotations.json")
@@ -39,7 +41,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="feed the annotated positions to the tracker instead of detecting")
     parser.add_argument("--noise-m", type=float, default=0.0,
                         help="with --ground-truth-detections: Gaussian noise (m per axis) on each position")
-    parser.add_argument("--token", help="bearer token for the server's camera, zone and line writes")
+    parser.add_argument("--token", help="the server's API token (camera, zone and line writes; it passes "
+                                        "site reads too)")
     parser.add_argument("--threads", type=int, help="with --model: inference threads")
     parser.add_argument("--gate-m", type=float, default=GATE_M, help="match distance in the floor plane")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
