@@ -130,8 +130,7 @@ class FusionState:
             # The move counted is from where the track was last seen, not from its prediction.
             was_confirmed, position, seen = track.confirmed, track.last_position_m, track.last_seen
             track.update(self.kalman, z_m[di], float(noise[di]), t, observation.camera_id)
-            if not track.confirmed and track.hits >= self.config.min_hits:
-                track.number, self.next_number = self.next_number, self.next_number + 1
+            self._confirm_if_due(track)
             if was_confirmed:
                 moved.append(track)
                 before_m.append(position)
@@ -143,9 +142,15 @@ class FusionState:
         for di in range(len(rows)):
             if di in taken or self._seen_by_another(z_m[di], t, observation.camera_id):
                 continue
-            self.tracks.append(Track.start(z_m[di], float(noise[di]), self.config.speed_var, t,
-                                           observation.camera_id))
+            track = Track.start(z_m[di], float(noise[di]), self.config.speed_var, t, observation.camera_id)
+            self._confirm_if_due(track)
+            self.tracks.append(track)
+            joined[rows[di]] = track
         return joined
+
+    def _confirm_if_due(self, track: Track) -> None:
+        if not track.confirmed and track.hits >= self.config.min_hits:
+            track.number, self.next_number = self.next_number, self.next_number + 1
 
     def _seen_by_another(self, xy_m: FloatArray, t: float, camera_id: str) -> bool:
         """Whether another camera fed a track at `t` this near `xy_m`: the same person in an

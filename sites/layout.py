@@ -76,6 +76,8 @@ class Zone:
             raise LayoutError(f"zone {self.id!r}: polygon_m repeats a corner")
         polygon = shapely.Polygon(corners)
         reason = str(shapely.is_valid_reason(polygon))
+        if polygon.convex_hull.area < MIN_ZONE_AREA_M2:  # all corners on one line
+            raise LayoutError(f"zone {self.id!r}: polygon_m is degenerate (its corners lie on a line)")
         if "Self-intersection" in reason:
             raise LayoutError(f"zone {self.id!r}: polygon_m intersects itself ({reason})")
         if polygon.area < MIN_ZONE_AREA_M2:
