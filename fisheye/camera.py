@@ -60,6 +60,8 @@ class FisheyeCamera(BaseModel):
     focal_px: tuple[float, float] = Field(description="[fx, fy] (px per unit normalised radius).")
     kb: list[float] = Field(min_length=1, max_length=5, description="k1..k5 of r(θ).")
     max_theta_deg: float | None = Field(default=None, gt=0, lt=180)
+    site: str | None = Field(default=None, pattern=CAMERA_ID_PATTERN,
+                             description="The site (floor plan) the camera belongs to.")
     site_pose: SitePose | None = None
 
     @field_validator("id")
@@ -208,8 +210,10 @@ class FisheyeCamera(BaseModel):
         return self.world_to_pixels(np.concatenate([points, np.zeros((len(points), 1))], axis=1))
 
     def floor_to_site(self, xy_m: ArrayLike) -> FloatArray | None:
-        """(N, 2) floor-frame m -> (N, 2) site-frame m, or None when the camera has no site pose."""
-        return None if self.site_pose is None else self.site_pose.floor_to_site(xy_m)
+        """(N, 2) floor-frame m -> (N, 2) site-frame m, or None when the camera has no site pose (a
+        camera of a site without one stands at the site's origin, unturned)."""
+        pose = self.site_pose or (SitePose() if self.site is not None else None)
+        return None if pose is None else pose.floor_to_site(xy_m)
 
     def image_circle_radius_px(self) -> float:
         """Radius (px, along u) of the calibrated field θ ≤ θmax around the principal point."""
