@@ -9,7 +9,9 @@ server does not go on reading (and discarding) the rest of a body it has already
 from __future__ import annotations
 
 import asyncio
+import json
 from dataclasses import dataclass
+from typing import Any
 
 from fastapi import Request
 from starlette.requests import ClientDisconnect
@@ -57,3 +59,18 @@ async def read_body(request: Request, limits: BodyLimits) -> bytes:
         raise ApiError(400, "client_disconnected", "the client closed the connection mid-body",
                        headers=CLOSE) from None
     return b"".join(chunks)
+
+
+async def read_json_object(request: Request, limits: BodyLimits, what: str, code: str) -> dict[str, Any]:
+    """A body that must be one JSON object (`what`, e.g. "a camera record"): 400 `bad_json` when it
+    is not JSON, 422 `code` when it is JSON but not an object."""
+    body = await read_body(request, limits)
+    try:
+        record = json.loads(body)
+    except ValueError as error:  # JSONDecodeError, UnicodeDecodeError, an int of too many digits
+        raise ApiError(400, "bad_json", f"the body is not JSON: {error}") from None
+    except RecursionError:
+        raise ApiError(400, "bad_json", f"the body is not {what}: JSON nested too deeply") from None
+    if not isinstance(record, dict):
+        raise ApiError(422, code, f"the body must be a JSON object ({what})")
+    return record

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from typing import Any
 
 from fastapi import APIRouter, Path, Request, Response, status
@@ -12,7 +11,7 @@ from fisheye import CalibrationError, FisheyeCamera, camera_to_dict
 from fisheye.camera import CAMERA_ID_PATTERN
 from service.dependencies import State, WriteAccess
 from service.errors import ApiError
-from service.request_body import BodyLimits, read_body
+from service.request_body import BodyLimits, read_json_object
 from service.schemas import CameraList, error_responses
 
 router = APIRouter(tags=["cameras"])
@@ -62,19 +61,13 @@ async def get_camera(state: State, camera_id: str = CameraId) -> dict[str, Any]:
 )
 async def put_camera(request: Request, response: Response, state: State,
                      camera_id: str = CameraId) -> dict[str, Any]:
-    body = await read_body(request, BodyLimits(_MAX_RECORD_BYTES, state.settings.body_timeout_s))
-    try:
-        record = json.loads(body)
-    except ValueError as error:  # JSONDecodeError, UnicodeDecodeError, an int of too many digits
-        raise ApiError(400, "bad_json", f"the body is not JSON: {error}") from None
-    except RecursionError:
-        raise ApiError(400, "bad_json", "the body is not a camera record: JSON nested too deeply") from None
-    if not isinstance(record, dict):
-        raise ApiError(422, "invalid_camera", "the body must be a JSON object (a camera record)")
+    limits = BodyLimits(_MAX_RECORD_BYTES, state.settings.body_timeout_s)
+    record = await read_json_object(request, limits, "a camera record", "invalid_camera")
     try:
         outcome = await run_in_threadpool(state.registry.put_record, camera_id, record)
     except CalibrationError as error:
         raise ApiError(422, "invalid_camera", str(error)) from None
+    await run_in_threadpool(state.sites.camera_changed, camera_id, outcome.camera)
     response.status_code = status.HTTP_201_CREATED if outcome.created else status.HTTP_200_OK
     return camera_to_dict(outcome.camera)
 
@@ -85,4 +78,5 @@ async def put_camera(request: Request, response: Response, state: State,
 async def delete_camera(state: State, camera_id: str = CameraId) -> Response:
     if not await run_in_threadpool(state.registry.delete, camera_id):
         raise not_found(camera_id)
+    await run_in_threadpool(state.sites.camera_changed, camera_id, None)
     return Response(status_code=204)
