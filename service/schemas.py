@@ -39,6 +39,10 @@ class Detection(BaseModel):
     site_position_m: list[float] | None = Field(
         description="[x, y] m in the site frame, when the camera has a site pose"
     )
+    track_id: str | None = Field(
+        description="the site's track this person joined (e.g. hall-a:17); null for a camera without a "
+                    "site and until a track is confirmed"
+    )
 
 
 class ImageSize(BaseModel):
