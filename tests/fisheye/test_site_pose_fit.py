@@ -45,7 +45,7 @@ def test_a_one_degree_yaw_error_is_fourteen_centimetres_at_eight_metres() -> Non
 
 def test_residuals_show_a_misplaced_point() -> None:
     floor = np.array([[0.0, 0.0], [4.0, 0.0], [0.0, 4.0], [4.0, 4.0]])
-    site = floor + [10.0, 0.0]
+    site = floor + np.array([10.0, 0.0])
     site[3] += [0.4, 0.0]
     fit = fit_site_pose(floor, site)
     assert int(np.argmax(fit.residuals_m)) == 3

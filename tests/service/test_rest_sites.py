@@ -47,7 +47,8 @@ def test_zones_and_lines_need_a_site_that_a_camera_names(client: httpx.Client,
     assert client.put(f"/v1/sites/{SITE}/zones/entrance", json={"polygon_m": SQUARE}).status_code == 201
     assert client.put(f"/v1/sites/{SITE}/zones/entrance", json={"polygon_m": SQUARE}).status_code == 200
     line = client.put(f"/v1/sites/{SITE}/lines/door", json={"from_m": [0, -3], "to_m": [0, 3]})
-    assert line.status_code == 201 and line.json() == {"id": "door", "from_m": [0.0, -3.0], "to_m": [0.0, 3.0]}
+    assert line.status_code == 201
+    assert line.json() == {"id": "door", "from_m": [0.0, -3.0], "to_m": [0.0, 3.0]}
     assert client.get("/v1/sites").json() == {
         "sites": [{"id": SITE, "cameras": ["cam-a", "cam-b"], "zones": ["entrance"]}]}
     site = client.get(f"/v1/sites/{SITE}").json()
@@ -71,7 +72,8 @@ def test_zones_and_lines_need_a_site_that_a_camera_names(client: httpx.Client,
     ("zones/bad%20id", {"polygon_m": SQUARE}, 422, "invalid_request"),
 ])
 def test_invalid_zone_and_line_bodies_are_refused_and_change_nothing(
-        client: httpx.Client, demo_camera: FisheyeCamera, path: str, body: Any, status: int, code: str) -> None:
+        client: httpx.Client, demo_camera: FisheyeCamera, path: str, body: Any, status: int,
+        code: str) -> None:
     put_site_cameras(client, demo_camera)
     before = client.get(f"/v1/sites/{SITE}").json()
     error = _error(client.put(f"/v1/sites/{SITE}/{path}", json=body), status, code)
@@ -129,14 +131,16 @@ def test_detect_tracks_one_person_across_two_cameras_and_counts_the_door(
 
 @pytest.mark.parametrize("value", ["yesterday", "nan", "inf", "-5", "1e20", "2025-13-01T00:00:00Z",
                                    "2025-12-01T00:00:00", "2025-12-01", ""])
-def test_invalid_capture_times_are_a_422(client: httpx.Client, demo_camera: FisheyeCamera, value: str) -> None:
+def test_invalid_capture_times_are_a_422(client: httpx.Client, demo_camera: FisheyeCamera,
+                                         value: str) -> None:
     put_site_cameras(client, demo_camera)
     answer = detect(client, "cam-a", frame_of(demo_camera, "cam-a", (-2.0, 0.3)), value)
     _error(answer, 422, "invalid_capture_time")
     assert client.get(f"/v1/sites/{SITE}/occupancy").json()["time"] is None
 
 
-def test_rfc3339_and_unix_capture_times_are_one_clock(client: httpx.Client, demo_camera: FisheyeCamera) -> None:
+def test_rfc3339_and_unix_capture_times_are_one_clock(client: httpx.Client,
+                                                      demo_camera: FisheyeCamera) -> None:
     put_site_cameras(client, demo_camera)
     frame = frame_of(demo_camera, "cam-a", (-2.0, 0.3))
     assert detect(client, "cam-a", frame, "2025-12-01T18:05:45.5+01:00").status_code == 200
@@ -155,7 +159,8 @@ def test_a_frame_too_late_is_dropped_and_counted(client: httpx.Client, demo_came
     assert client.get(f"/v1/sites/{SITE}/occupancy").json()["count"] == 1
 
 
-def test_a_camera_moved_to_another_site_ends_its_tracks(client: httpx.Client, demo_camera: FisheyeCamera) -> None:
+def test_a_camera_moved_to_another_site_ends_its_tracks(client: httpx.Client,
+                                                        demo_camera: FisheyeCamera) -> None:
     put_site_cameras(client, demo_camera)
     ids = walk(client, demo_camera, start=(-2.0, 0.5), velocity=(0.0, 0.0), steps=5, cameras=("cam-a",))
     assert ids[-1] == f"{SITE}:1"
@@ -200,8 +205,8 @@ def test_site_reads_need_the_read_token(settings_for: Callable[..., Settings],
         _error(client.put(f"/v1/sites/{SITE}/zones/z", json=zone, headers={"Authorization": "Bearer reader"}),
                401, "unauthorized")
         assert client.put(f"/v1/sites/{SITE}/zones/z", json=zone, headers=writer).status_code == 201
-        for path in ("/v1/sites", f"/v1/sites/{SITE}", f"/v1/sites/{SITE}/occupancy", f"/v1/sites/{SITE}/events",
-                     "/v1/cameras/cam-a/latest", "/v1/cameras/cam-a/latest.jpg"):
+        for path in ("/v1/sites", f"/v1/sites/{SITE}", f"/v1/sites/{SITE}/occupancy",
+                     f"/v1/sites/{SITE}/events", "/v1/cameras/cam-a/latest", "/v1/cameras/cam-a/latest.jpg"):
             _error(client.get(path), 401, "unauthorized")
             _error(client.get(path, headers={"Authorization": "Bearer wrong"}), 401, "unauthorized")
         for headers in ({"Authorization": "Bearer reader"}, writer):
