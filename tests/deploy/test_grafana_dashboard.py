@@ -34,7 +34,8 @@ def _exposed_series() -> set[str]:
     metrics.follow_layout("hall", layout)
     metrics.observe_site("hall", "used", {"door": (0, 0)}, {"door": (1, 1)}, occupancy, 0.0004)
     text = metrics.exposition().decode()
-    return {line.split("{")[0].split(" ")[0] for line in text.splitlines() if line and not line.startswith("#")}
+    samples = [line for line in text.splitlines() if line and not line.startswith("#")]
+    return {line.split("{")[0].split(" ")[0] for line in samples}
 
 
 def test_the_dashboard_parses_and_names_existing_metrics() -> None:
