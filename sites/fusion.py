@@ -100,14 +100,20 @@ class FusionState:
 
     def _costs(self, z_m: FloatArray, noise_m2: FloatArray) -> FloatArray:
         """(T, M) gated squared Mahalanobis distances of M positions to T tracks."""
-        costs = np.full((len(self.tracks), len(z_m)), _UNASSIGNABLE)
-        for row, track in enumerate(self.tracks):
-            residual, S = track.innovation(z_m, noise_m2)
-            d2 = np.einsum("mi,mij,mj->m", residual, np.linalg.inv(S), residual)
-            distance_m = np.hypot(residual[:, 0], residual[:, 1])
-            near = (d2 <= self.config.gate_chi2) & (distance_m <= self.config.max_gate_m)
-            costs[row, near] = d2[near]
-        return costs
+        if not self.tracks:
+            return np.full((0, len(z_m)), _UNASSIGNABLE)
+        position = np.stack([track.position_m for track in self.tracks])  # (T, 2)
+        P = np.stack([track.P[:2, :2] for track in self.tracks])          # (T, 2, 2)
+        dx = z_m[None, :, 0] - position[:, None, 0]                       # (T, M)
+        dy = z_m[None, :, 1] - position[:, None, 1]
+        # Innovation covariance S = P + R per pair, inverted in closed form (2 x 2).
+        a = P[:, None, 0, 0] + noise_m2[None, :]
+        b = P[:, None, 0, 1]
+        c = P[:, None, 1, 0]
+        d = P[:, None, 1, 1] + noise_m2[None, :]
+        d2 = (d * dx * dx - (b + c) * dx * dy + a * dy * dy) / (a * d - b * c)
+        near = (d2 <= self.config.gate_chi2) & (np.hypot(dx, dy) <= self.config.max_gate_m)
+        return np.where(near, d2, _UNASSIGNABLE)
 
     def step(self, observation: SiteObservation) -> list[Track | None]:
         """Fold one frame (capture_time ≥ time) into the tracks; the track each detection joined."""

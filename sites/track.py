@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 FloatArray = NDArray[np.float64]
 
 H = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])  # the position part of the state
-HISTORY_LENGTH = 64
+HISTORY_LENGTH = 32
 
 
 def transition(dt_s: float) -> FloatArray:
@@ -41,7 +41,8 @@ def process_noise(dt_s: float, accel_var: float) -> FloatArray:
 
 class KalmanStep:
     """OpenCV's Kalman filter as a function of a track's (x, P): one per fusion state (not shared
-    across threads), its matrices set for each call."""
+    across threads), its matrices set for each call. OpenCV may keep and later write into the very
+    buffers it is given, so it is given copies: a track's arrays are shared with its snapshots."""
 
     def __init__(self) -> None:
         self._filter = cv2.KalmanFilter(4, 2, 0, cv2.CV_64F)
@@ -49,21 +50,21 @@ class KalmanStep:
 
     def motion(self, F: FloatArray, Q: FloatArray) -> None:
         """Set the transition and process noise of the next `predict` calls."""
-        self._filter.transitionMatrix = F
-        self._filter.processNoiseCov = Q
+        self._filter.transitionMatrix = F.copy()
+        self._filter.processNoiseCov = Q.copy()
 
     def predict(self, x: FloatArray, P: FloatArray) -> tuple[FloatArray, FloatArray]:
-        self._filter.statePost = x.reshape(4, 1)
-        self._filter.errorCovPost = P
+        self._filter.statePost = x.reshape(4, 1).copy()
+        self._filter.errorCovPost = P.copy()
         self._filter.predict()
         state = np.array(self._filter.statePre, dtype=np.float64).reshape(4)
         return state, np.array(self._filter.errorCovPre, dtype=np.float64)
 
     def update(self, x: FloatArray, P: FloatArray, z_m: FloatArray,
                R: FloatArray) -> tuple[FloatArray, FloatArray]:
-        self._filter.statePre = x.reshape(4, 1)
-        self._filter.errorCovPre = P
-        self._filter.measurementNoiseCov = R
+        self._filter.statePre = x.reshape(4, 1).copy()
+        self._filter.errorCovPre = P.copy()
+        self._filter.measurementNoiseCov = R.copy()
         self._filter.correct(z_m.reshape(2, 1).astype(np.float64))
         state = np.array(self._filter.statePost, dtype=np.float64).reshape(4)
         return state, np.array(self._filter.errorCovPost, dtype=np.float64)
@@ -116,13 +117,6 @@ class Track:
         """Move the state on by the motion `kalman` was last given."""
         self.x, self.P = kalman.predict(self.x, self.P)
 
-    def innovation(self, z_m: FloatArray, noise_m2: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Residuals (M, 2) of positions `z_m` (M, 2) against this track and their covariances (M, 2, 2),
-        for measurement variances `noise_m2` (M,)."""
-        residual = z_m - self.x[:2]
-        S = self.P[:2, :2][None, :, :] + noise_m2[:, None, None] * np.eye(2)[None, :, :]
-        return residual, S
-
     def update(self, kalman: KalmanStep, z_m: FloatArray, noise_m2: float, t: float, camera_id: str) -> None:
         """Fold in one position `z_m` (2,) m of variance `noise_m2` seen by `camera_id` at `t`."""
         self.x, self.P = kalman.update(self.x, self.P, z_m, noise_m2 * np.eye(2))
@@ -137,7 +131,12 @@ class Track:
         return sorted(c for c, seen in self.cameras_seen.items() if seen >= self.last_seen - window_s)
 
     def copy(self) -> Track:
-        return Track(x=self.x.copy(), P=self.P.copy(), first_seen=self.first_seen, last_seen=self.last_seen,
-                     number=self.number, hits=self.hits, cameras_seen=dict(self.cameras_seen),
-                     dwell_s=dict(self.dwell_s), line_anchors=dict(self.line_anchors),
-                     history=deque(self.history, maxlen=HISTORY_LENGTH))
+        """An independent twin (the tracker snapshots every track before each frame, so this is
+        cheap: `x` and `P` are shared, since predict and update replace them, never change them)."""
+        twin = object.__new__(Track)
+        twin.__dict__.update(self.__dict__)
+        twin.cameras_seen = dict(self.cameras_seen)
+        twin.dwell_s = dict(self.dwell_s)
+        twin.line_anchors = dict(self.line_anchors)
+        twin.history = self.history.copy()
+        return twin

@@ -169,3 +169,23 @@ def test_observations_with_mismatched_arrays_are_refused(bad: dict[str, np.ndarr
 def test_an_observation_needs_a_finite_capture_time() -> None:
     with pytest.raises(ValueError, match="capture_time"):
         SiteObservation.of("cam-a", float("nan"), np.zeros((0, 2)))
+
+
+def test_many_late_frames_give_the_tracks_of_capture_order() -> None:
+    # Every tenth frame swapped behind the next step's frames: the tracker must end exactly where
+    # the same frames in capture order (ties in arrival order) lead, line tallies included.
+    people = [line_walk((-4.0, y), (1.0, 0.2)) for y in (-1.5, 0.0, 1.5)]
+    people += [line_walk((4.0, y), (-0.8, 0.0)) for y in (-1.0, 1.0)]
+    layout = SiteLayout.of(lines=[CountingLine("door", np.array([0.0, -3.0]), np.array([0.0, 3.0]))])
+    frames_in_order = [observation for observation, _ in frames(TWO_CAMS, people, seconds=8.0)]
+    arrival = list(range(len(frames_in_order)))
+    for index in range(0, len(arrival) - 2, 10):
+        arrival[index], arrival[index + 2] = arrival[index + 2], arrival[index]
+    by_capture = sorted(arrival, key=lambda i: (frames_in_order[i].capture_time, arrival.index(i)))
+    reference = SiteTracker("hall", layout=layout)
+    _play(reference, [frames_in_order[i] for i in by_capture])
+    tracker = SiteTracker("hall", layout=layout)
+    _play(tracker, [frames_in_order[i] for i in arrival])
+    assert tracker.frames.used_late > 10
+    assert tracker.occupancy() == reference.occupancy()
+    assert tracker.occupancy()["count"] == 5
