@@ -43,7 +43,7 @@ def observations(scene: Scene) -> list[SiteObservation]:
     where = rng.uniform(low, high, (scene.people, 2))
     heading = rng.uniform(0, 2 * np.pi, scene.people)
     speed = rng.uniform(0.5, 1.5, scene.people)
-    frames = []
+    frames: list[SiteObservation] = []
     dt = 1.0 / scene.fps
     for step in range(round(scene.seconds * scene.fps)):
         heading += rng.normal(0.0, 0.15, scene.people)
