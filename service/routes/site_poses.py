@@ -6,13 +6,14 @@ from typing import Annotated, Any
 
 import numpy as np
 from fastapi import APIRouter, Path, Request
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from starlette.concurrency import run_in_threadpool
 
 from fisheye import FisheyeCamera, camera_to_dict, fit_site_pose
 from fisheye.camera import CAMERA_ID_PATTERN
 from service.dependencies import State, require_write_token
-from service.errors import ApiError
+from service.errors import ApiError, describe_validation
+from service.request_body import BodyLimits, read_json_object
 from service.routes.cameras import not_found
 from service.schemas import error_responses
 
@@ -38,6 +39,28 @@ class PoseFitRequest(BaseModel):
     points: list[PosePoint] = Field(min_length=2, max_length=256)
     save: bool = Field(False, description="store the fitted pose in the camera's record (needs the API "
                                           "token like a camera write)")
+
+
+def _inlined(schema: dict[str, Any]) -> dict[str, Any]:
+    """A JSON schema with its `$defs` references written out (the OpenAPI document has no `$defs`)."""
+    defs = schema.pop("$defs", {})
+
+    def expand(node: Any) -> Any:
+        if isinstance(node, dict):
+            if "$ref" in node:
+                return expand(defs[node["$ref"].rsplit("/", 1)[-1]])
+            return {key: expand(value) for key, value in node.items()}
+        if isinstance(node, list):
+            return [expand(item) for item in node]
+        return node
+
+    expanded: dict[str, Any] = expand(schema)
+    return expanded
+
+
+_REQUEST_BODY = {"required": True, "content": {"application/json": {
+    "schema": _inlined(PoseFitRequest.model_json_schema())}}}
+_MAX_BODY_BYTES = 64 * 1024
 
 
 class PoseFitResponse(BaseModel):
@@ -66,15 +89,21 @@ def _floor_points(camera: FisheyeCamera, points: list[PosePoint]) -> np.ndarray:
 
 @router.post(
     "/v1/cameras/{camera_id}/site-pose/fit", response_model=PoseFitResponse,
-    responses=error_responses(401, 404, 422),
+    responses=error_responses(400, 401, 404, 413, 422), openapi_extra={"requestBody": _REQUEST_BODY},
     summary="Fit a camera's site pose from floor points whose site positions are known",
     description="Two or more points, each seen by the camera (`floor_m` in its floor frame, or the `pixel` "
                 "of it) with its `site_m` on the map. Answers the rigid pose that fits them best and each "
                 "point's residual in metres (a 1° yaw error is 14 cm at 8 m from the nadir). `save` "
                 "stores the pose in the camera's record.",
 )
-async def fit_pose(request: Request, body: PoseFitRequest, state: State,
+async def fit_pose(request: Request, state: State,
                    camera_id: str = Path(pattern=CAMERA_ID_PATTERN)) -> dict[str, Any]:
+    limits = BodyLimits(_MAX_BODY_BYTES, state.settings.body_timeout_s)
+    record = await read_json_object(request, limits, "a pose fit request", "invalid_request")
+    try:
+        body = PoseFitRequest.model_validate(record)
+    except ValidationError as error:
+        raise ApiError(422, "invalid_request", describe_validation(error)) from None
     if body.save:
         require_write_token(request, state)
     camera = await run_in_threadpool(state.registry.get, camera_id)
