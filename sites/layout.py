@@ -20,9 +20,11 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
+from fisheye.camera import CAMERA_ID_PATTERN
+
 FloatArray = NDArray[np.float64]
 
-NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
+NAME_PATTERN = CAMERA_ID_PATTERN  # site, zone and line ids follow the rule of camera ids
 _NAME_RE = re.compile(NAME_PATTERN)
 MAX_CORNERS = 256
 MAX_COORDINATE_M = 100_000.0
