@@ -103,9 +103,9 @@ class SiteHub:
         site = self._site(site_id)
         observation = SiteObservation(camera.id, capture_time, positions, result.detections.distance_m,
                                       result.detections.scores)
-        started = time.perf_counter()
         with site.lock:
             self._refresh_layout(site_id, site)
+            started = time.perf_counter()
             site.cameras.add(camera.id)
             before = site.tracker.line_totals()
             outcome = site.tracker.update(observation)
@@ -135,8 +135,11 @@ class SiteHub:
         watcher = Watcher(loop)
         watcher.offer(self.occupancy(site_id))
         site = self._site(site_id)
-        with site.lock:
-            site.watchers.add(watcher)
+        with site.lock:  # close() sets _closed before it takes each site's lock to end its watchers
+            if self._closed:  # the service is stopping: the stream ends after the occupancy now
+                watcher.offer(None)
+            else:
+                site.watchers.add(watcher)
         return watcher
 
     def unwatch(self, site_id: str, watcher: Watcher) -> None:
