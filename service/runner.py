@@ -119,8 +119,10 @@ class InferenceRunner:
     def _detect_and_track(self, data: bytes, camera: FisheyeCamera, min_score: float | None,
                           frame_id: str | None, capture_time: float) -> DetectionResult:
         result = self.pipeline.detect(data, camera, min_score=min_score, frame_id=frame_id)
-        if self.site_tracking is None or camera.site is None:
+        if self.site_tracking is None:
             return result
+        # Called for cameras without a site too: one that left its site (by a write through another
+        # process) ends its tracks there with its next frame.
         return self.site_tracking(camera, result, capture_time)
 
     async def run_admitted(self, data: bytes, camera: FisheyeCamera, *, min_score: float | None,

@@ -20,6 +20,7 @@ from service_sites import (
 )
 
 from fisheye import FisheyeCamera
+from service.cameras import CameraRegistry
 from service.config import Settings
 
 SQUARE = [[-3.0, -1.0], [-1.0, -1.0], [-1.0, 1.0], [-3.0, 1.0]]
@@ -229,3 +230,18 @@ def test_zones_and_lines_survive_a_restart(settings_for: Callable[..., Settings]
         occupancy = client.get(f"/v1/sites/{SITE}/occupancy").json()
         assert occupancy["zones"] == {"entrance": {"count": 0}}
         assert occupancy["lines"] == {"door": {"in": 0, "out": 0}}
+
+
+def test_a_camera_that_leaves_its_site_through_another_process_ends_its_tracks_with_its_next_frame(
+        client: httpx.Client, live_server: LiveServer, demo_camera: FisheyeCamera) -> None:
+    put_site_cameras(client, demo_camera)
+    walk(client, demo_camera, start=(-2.0, 0.5), velocity=(0.0, 0.0), steps=5, cameras=("cam-a",))
+    assert client.get(f"/v1/sites/{SITE}/occupancy").json()["count"] == 1
+    # Another process shares the database: its write reaches this one only through the next frame.
+    other = CameraRegistry(live_server.settings.database)
+    record = {k: v for k, v in site_camera_record(demo_camera, "cam-a").items() if k != "site"}
+    other.put_record("cam-a", record)
+    other.close()
+    answer = detect(client, "cam-a", frame_of(demo_camera, "cam-a", (-2.0, 0.5)), T0 + 2)
+    assert answer.json()["detections"][0]["track_id"] is None
+    assert client.get(f"/v1/sites/{SITE}/occupancy").json()["count"] == 0
