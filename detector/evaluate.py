@@ -37,7 +37,15 @@ from detector.checkpoint import CheckpointError, load_checkpoint
 from detector.data.dataset import load_rgb
 from detector.data.readers import DatasetFormatError, FrameAnnotations, read_dataset
 from detector.graph import contract_info, contract_module
-from detector.metrics import EvalFrame, compute_metrics, localisation_points, pr_curve
+from detector.metrics import (
+    BOX_SIDE,
+    CENTRE,
+    FOOT,
+    EvalFrame,
+    compute_metrics,
+    localisation_points,
+    pr_curve,
+)
 from detector.plots import plot_pe_by_distance, plot_pr_curve
 from fisheye import FisheyeCamera, assumed_camera
 from fisheye.boxes import cepdof_to_corners
@@ -126,7 +134,7 @@ def eval_frames(predictor: Predictor, frames: Sequence[FrameAnnotations], batch_
                 # CEPDOF/WEPDTOF frames are scored against the file's own boxes (DESIGN.md).
                 gt_corners=_corners_or_none(frame.file_boxes_cxcywha),
                 crowd_corners=_corners_or_none(frame.file_crowd_cxcywha),
-                camera_assumed=frame.camera_assumed))
+                camera_assumed=frame.camera_assumed, det_foot_px=detections.foot_px))
     return result
 
 
@@ -152,8 +160,11 @@ def write_plots(evaluation: Evaluation, folder: Path, title: str) -> list[Path]:
     precision, recall, _ = pr_curve(evaluation.frames)
     pr_path, pe_path = folder / "pr_curve.png", folder / "pe_by_distance.png"
     plot_pr_curve(precision, recall, pr_path, f"{title}: PR at IoU 0.5")
-    distances, foot, centre = localisation_points(evaluation.frames)
-    plot_pe_by_distance(distances, foot, centre, pe_path, f"{title}: localisation error")
+    distances, errors = localisation_points(evaluation.frames)
+    has_foot = any(frame.det_foot_px is not None for frame in evaluation.frames)
+    labels = {FOOT: "predicted foot", BOX_SIDE: "box-side foot point", CENTRE: "box centre"}
+    shown = {labels[p]: e for p, e in errors.items() if has_foot or p != FOOT}
+    plot_pe_by_distance(distances, shown, pe_path, f"{title}: localisation error")
     return [pr_path, pe_path]
 
 

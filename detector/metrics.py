@@ -7,8 +7,9 @@
   to them count neither way) and so are unmatched detections whose own floor distance (foot point)
   lies outside it.
 - PE: Euclidean floor error (m) of detections matched at IoU 0.5 to people with known positions,
-  placed by their foot point (`mPE`, `PE_near/mid/far` by GT distance) or by their box centre
-  (`mPE_center`, ...).
+  placed by their foot point (`mPE`, `PE_near/mid/far` by GT distance): the model's own `foot`
+  output where it has one, else the box-side foot point; by the box-side foot point alone
+  (`mPE_box_side`, ...) and by their box centre (`mPE_center`, ...), all on the same matches.
 - precision / recall at one score threshold, matched at IoU 0.5; `recall_nadir` the recall of the
   people below the lens (box centre within 0.2 of the image circle's radius), seen from above.
 
@@ -65,6 +66,7 @@ class EvalFrame:
     gt_corners: FloatArray | None = None  # (G, 4, 2)
     crowd_corners: FloatArray | None = None  # (M, 4, 2)
     camera_assumed: bool = False
+    det_foot_px: FloatArray | None = None  # (D, 2): the model's foot points, when it predicts them
 
     def __post_init__(self) -> None:
         g, d = len(self.gt_boxes), len(self.det_boxes)
@@ -72,6 +74,8 @@ class EvalFrame:
                 or self.gt_distances_m.shape != (g,) or self.det_boxes.shape != (d, 4)
                 or self.det_scores.shape != (d,)):
             raise ValueError("EvalFrame arrays disagree in shape")
+        if self.det_foot_px is not None and self.det_foot_px.shape != (d, 2):
+            raise ValueError(f"EvalFrame det_foot_px {self.det_foot_px.shape} must be ({d}, 2)")
         if self.gt_corners is not None and self.gt_corners.shape != (g, 4, 2):
             raise ValueError(f"EvalFrame gt_corners {self.gt_corners.shape} must be ({g}, 4, 2)")
         m = len(self.crowd_boxes)
@@ -193,22 +197,36 @@ def _ap_summary(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch]) -> 
     return {"mAP": float(np.mean(per_threshold)), "AP50": per_threshold[0], "AP75": per_threshold[5]}
 
 
-def _localisation_errors(frame: EvalFrame, match: FrameMatch, use_foot: bool
+FOOT, BOX_SIDE, CENTRE = "foot", "box_side", "center"  # how a detection is placed on the floor
+PLACEMENT_SUFFIX = {FOOT: "", BOX_SIDE: "_box_side", CENTRE: "_center"}  # of the PE keys
+
+
+def placement_points(frame: EvalFrame, det_index: NDArray[np.int64], placement: str) -> FloatArray:
+    """(M, 2) frame px where the detections `det_index` stand, by `placement` (FOOT falls back to
+    the box side for a model without a foot output)."""
+    boxes = frame.det_boxes[det_index]
+    if placement == FOOT and frame.det_foot_px is not None:
+        return frame.det_foot_px[det_index].reshape(-1, 2)
+    if placement == CENTRE:
+        return boxes[:, :2]
+    return foot_points(boxes, frame.principal_point).reshape(-1, 2)
+
+
+def _localisation_errors(frame: EvalFrame, match: FrameMatch, placement: str
                          ) -> tuple[FloatArray, FloatArray]:
-    """(M,) errors m and (M,) GT distances m of the IoU-0.5 matches with known positions."""
+    """(M,) errors m and (M,) GT distances m of the IoU-0.5 matches with known positions, placed
+    by `placement`; a match without a floor point by any placement is left out of every one."""
     camera = frame.floor_camera
     if camera is None:
         return np.zeros(0), np.zeros(0)
     matched = greedy_match(match.iou, 0.5)
     det_index = match.order[matched >= 0]
     gt_index = matched[matched >= 0]
-    boxes = frame.det_boxes[det_index]
-    points = foot_points(boxes, camera.principal_point) if use_foot else boxes[:, :2]
-    predicted = camera.pixels_to_floor(points.reshape(-1, 2))
     truth = frame.gt_locations_m[gt_index]
-    error = np.linalg.norm(predicted - truth, axis=1)
-    valid = np.isfinite(error)
-    return error[valid], frame.gt_distances_m[gt_index][valid]
+    errors = {p: np.linalg.norm(camera.pixels_to_floor(placement_points(frame, det_index, p)) - truth, axis=1)
+              for p in PLACEMENT_SUFFIX}
+    valid = np.all(np.isfinite(np.stack(list(errors.values()))), axis=0)
+    return errors[placement][valid], frame.gt_distances_m[gt_index][valid]
 
 
 def _mean(values: FloatArray) -> float:
@@ -273,8 +291,8 @@ def compute_metrics(frames: Sequence[EvalFrame], min_score: float) -> dict[str, 
     result: dict[str, float] = _ap_summary(frames, prepared)
     for name, distance_range in DISTANCE_BINS_M.items():
         result[f"AP_{name}"] = _ap_at(frames, prepared, 0.5, distance_range)
-    for suffix, use_foot in (("", True), ("_center", False)):
-        pairs = [_localisation_errors(f, m, use_foot) for f, m in zip(frames, prepared, strict=True)]
+    for placement, suffix in PLACEMENT_SUFFIX.items():
+        pairs = [_localisation_errors(f, m, placement) for f, m in zip(frames, prepared, strict=True)]
         errors = np.concatenate([p[0] for p in pairs]) if pairs else np.zeros(0)
         distances = np.concatenate([p[1] for p in pairs]) if pairs else np.zeros(0)
         result[f"mPE{suffix}"] = _mean(errors)
@@ -294,17 +312,17 @@ def compute_metrics(frames: Sequence[EvalFrame], min_score: float) -> dict[str, 
     return result
 
 
-def localisation_points(frames: Sequence[EvalFrame]) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """GT distance (M,), foot-point error (M,) and centre error (M,) of every IoU-0.5 match."""
-    distances, foot, centre = [], [], []
+def localisation_points(frames: Sequence[EvalFrame]) -> tuple[FloatArray, dict[str, FloatArray]]:
+    """GT distance (M,) of every IoU-0.5 match with a floor point, and its error (M,) m by each
+    placement (FOOT, BOX_SIDE, CENTRE)."""
+    distances: list[FloatArray] = []
+    errors: dict[str, list[FloatArray]] = {p: [] for p in PLACEMENT_SUFFIX}
     for frame in frames:
         match = _prepare(frame)
-        foot_error, distance = _localisation_errors(frame, match, True)
-        centre_error, _ = _localisation_errors(frame, match, False)
-        if len(foot_error) == len(centre_error):
-            distances.append(distance)
-            foot.append(foot_error)
-            centre.append(centre_error)
+        for placement in PLACEMENT_SUFFIX:
+            error, distance = _localisation_errors(frame, match, placement)
+            errors[placement].append(error)
+        distances.append(distance)
     if not distances:
-        return np.zeros(0), np.zeros(0), np.zeros(0)
-    return np.concatenate(distances), np.concatenate(foot), np.concatenate(centre)
+        return np.zeros(0), {p: np.zeros(0) for p in PLACEMENT_SUFFIX}
+    return np.concatenate(distances), {p: np.concatenate(e) for p, e in errors.items()}

@@ -37,24 +37,23 @@ def plot_pr_curve(precision: NDArray[np.float64], recall: NDArray[np.float64], p
     plt.close(figure)
 
 
-def plot_pe_by_distance(distances_m: NDArray[np.float64], foot_error_m: NDArray[np.float64],
-                        centre_error_m: NDArray[np.float64], path: Path, title: str) -> None:
-    """Scatter of errors against GT distance and their mean per 2 m bin, foot point vs centre."""
+def plot_pe_by_distance(distances_m: NDArray[np.float64], errors_m: dict[str, NDArray[np.float64]],
+                        path: Path, title: str) -> None:
+    """Scatter of each placement's errors (label -> (M,) m) against GT distance (M,) m, and their
+    mean per 2 m bin."""
     plt = _pyplot()
     figure, axes = plt.subplots(figsize=(6, 4))
-    axes.scatter(distances_m, centre_error_m, s=4, alpha=0.25, color="tab:orange")
-    axes.scatter(distances_m, foot_error_m, s=4, alpha=0.25, color="tab:blue")
+    colours = dict(zip(errors_m, ("tab:blue", "tab:green", "tab:orange", "tab:red"), strict=False))
+    for label, error in errors_m.items():
+        axes.scatter(distances_m, error, s=4, alpha=0.2, color=colours[label])
     if len(distances_m):
         edges = np.arange(0.0, math.ceil(float(distances_m.max()) / 2) * 2 + 2.0, 2.0)
-        centres, foot_means, centre_means = [], [], []
-        for low, high in itertools.pairwise(edges):
-            inside = (distances_m >= low) & (distances_m < high)
-            if inside.any():
-                centres.append((low + high) / 2)
-                foot_means.append(float(foot_error_m[inside].mean()))
-                centre_means.append(float(centre_error_m[inside].mean()))
-        axes.plot(centres, foot_means, "-o", color="tab:blue", label="foot point (mean)")
-        axes.plot(centres, centre_means, "-o", color="tab:orange", label="box centre (mean)")
+        bins = [(low, high) for low, high in itertools.pairwise(edges)
+                if ((distances_m >= low) & (distances_m < high)).any()]
+        centres = [(low + high) / 2 for low, high in bins]
+        for label, error in errors_m.items():
+            means = [float(error[(distances_m >= low) & (distances_m < high)].mean()) for low, high in bins]
+            axes.plot(centres, means, "-o", color=colours[label], label=f"{label} (mean)")
         axes.legend()
     axes.set_xlabel("distance from nadir (m)")
     axes.set_ylabel("localisation error (m)")

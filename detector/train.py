@@ -28,6 +28,7 @@ from detector.trainer import LAST, TrainConfig, Trainer
 from detector.yolox.finetune import STAGES, FinetuneConfig, Finetuner, YoloxDetectorConfig
 from detector.yolox.fisheye import FisheyeDetectorConfig
 from detector.yolox.frames import FrameAugment
+from detector.yolox.network import YoloxNano
 from detector.yolox.polar import PolarDetectorConfig, init_from_pretrained
 from detector.yolox.strips import StripAugment
 
@@ -59,8 +60,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="torch intra-op threads (on a busy CPU, 1 is often fastest)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     polar = parser.add_argument_group("YOLOX, polar or fisheye view (fine-tuned from COCO YOLOX-Nano)")
-    polar.add_argument("--init-from", default=None, metavar="PATH.onnx",
-                       help="YOLOX-Nano's COCO ONNX: fine-tune a person detector from it")
+    polar.add_argument("--init-from", default=None, metavar="PATH.onnx|PATH.pt",
+                       help="YOLOX-Nano's COCO ONNX: fine-tune a person detector from it; or a polar "
+                            "YOLOX checkpoint (e.g. models/fishloc-default.pt): go on from its network "
+                            "and strip")
+    polar.add_argument("--foot", action="store_true",
+                       help="add the foot output (each box's floor-contact point, learnt from the "
+                            "renders' location_m); train it alone with --freeze stem dark2 dark3 dark4 "
+                            "dark5 neck head --distill 0")
     polar.add_argument("--view", choices=("polar", "fisheye"), default=None,
                        help="what the YOLOX reads: the polar unwrap (default) or the letterboxed frame "
                             "with a radius-aligned head (--input-size, default 640)")
@@ -143,6 +150,32 @@ def yolox_view(args: argparse.Namespace) -> tuple[YoloxDetectorConfig, StripAugm
             StripAugment(radius_scales=tuple(args.zoom)))
 
 
+def initial_network(args: argparse.Namespace, model_config: YoloxDetectorConfig
+                    ) -> tuple[YoloxDetectorConfig, YoloxNano]:
+    """The network `--init-from` starts from and its config: the COCO ONNX's person network in
+    `model_config`, or a polar checkpoint's own network and strip; `--foot` adds the foot branch."""
+    if Path(args.init_from).suffix.lower() != ".pt":
+        if args.foot:
+            if not isinstance(model_config, PolarDetectorConfig):
+                raise ValueError("--foot is an option of the polar view")
+            model_config = replace(model_config, foot=True)
+        return model_config, init_from_pretrained(args.init_from, model_config)
+    checkpoint = load_checkpoint(args.init_from)
+    if not isinstance(checkpoint.config, PolarDetectorConfig):
+        raise ValueError(f"{args.init_from} is no polar YOLOX checkpoint; --init-from takes the COCO "
+                         "ONNX or a polar YOLOX checkpoint")
+    if args.view == "fisheye" or args.strip is not None or args.inner_head or args.zoom != [1.0]:
+        raise ValueError(f"{args.init_from} fixes the view and strip; --view, --strip, --inner-head "
+                         "and --zoom are options of a start from the COCO ONNX")
+    network = checkpoint.build(args.init_from)
+    if not isinstance(network, YoloxNano):
+        raise ValueError(f"{args.init_from} holds no YOLOX network")
+    model_config = checkpoint.config
+    if args.foot and not model_config.foot:
+        model_config, network = replace(model_config, foot=True), network.with_foot()
+    return model_config, network
+
+
 def run_polar(args: argparse.Namespace) -> int:
     """`--init-from`: fine-tune the YOLOX of `--view` (polar by default). Every input is checked
     before OUT is touched."""
@@ -158,7 +191,7 @@ def run_polar(args: argparse.Namespace) -> int:
             checkpoint_every_s=args.checkpoint_every or defaults.checkpoint_every_s,
             seed=args.seed, val_limit=args.val_limit, device=args.device,
             augment=augment)
-        initial = init_from_pretrained(args.init_from, model_config)
+        model_config, initial = initial_network(args, model_config)
         train_frames = [frame for path in args.data for frame in read_dataset(path)]
         val_frames = read_dataset(args.val) if args.val else None
         names = ", ".join(Path(path).parent.name or str(path) for path in args.data)

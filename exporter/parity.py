@@ -3,7 +3,8 @@
 Both outputs are compared as sets, since two peaks of (nearly) equal score may leave `topk` in either
 order: every entry of one output with a score of at least `BOX_SCORE_FLOOR` needs an entry of the
 other whose score is within `score_atol` and whose box is within `box_atol_px` on every coordinate,
-and the number of detections above the model's threshold must agree. Lower entries are left out: in
+and the number of detections above the model's threshold must agree. A model with a `foot` output
+has its foot points compared with their box, as two more coordinates. Lower entries are left out: in
 flat, low heatmap regions (an untrained head, the black outside of the image circle) the 3x3 peak
 test flips between neighbouring cells with rounding at the 1e-7 level, and such entries are never
 detections.
@@ -93,6 +94,14 @@ def check_parity(torch_model: nn.Module, model: OnnxModel, frames: NDArray[np.ui
     raw = model.run_batch(frames)
     onnx_boxes = np.stack([r.boxes for r in raw])
     onnx_scores = np.stack([r.scores for r in raw])
+    torch_foot = torch_outputs[2].numpy() if len(torch_outputs) > 2 else None
+    feet = [r.foot for r in raw if r.foot is not None]
+    onnx_foot = np.stack(feet) if feet and len(feet) == len(raw) else None
+    if (torch_foot is None) != (onnx_foot is None):
+        raise ParityError(f"the foot output is in {'torch' if onnx_foot is None else 'onnxruntime'} only")
+    if torch_foot is not None and onnx_foot is not None:
+        torch_boxes = np.concatenate([torch_boxes, torch_foot], axis=-1)  # (N, K, 6)
+        onnx_boxes = np.concatenate([onnx_boxes, onnx_foot], axis=-1)
     if onnx_boxes.shape != torch_boxes.shape or onnx_scores.shape != torch_scores.shape:
         raise ParityError(f"output shapes differ: torch {torch_boxes.shape}/{torch_scores.shape}, "
                           f"onnx {onnx_boxes.shape}/{onnx_scores.shape}")

@@ -2,6 +2,7 @@
 
     fishloc calibrate --marks marks.csv --altitude 3.2 --image-size 2952 2952 -o camera.yaml
     fishloc calibrate --opencv K_D.yaml --altitude 3.2 -o camera.yaml
+    fishloc calibrate --check-altitude camera.yaml --marks marks.csv
 
 The marks.csv format is described in fisheye/ruler_marks.py and the README ("Calibration").
 """
@@ -16,9 +17,16 @@ from pathlib import Path
 
 import numpy as np
 
+from fisheye.altitude_check import check_altitude
 from fisheye.calibration import MAX_COEFFICIENTS, RulerFit, RulerFitConfig, fit_ruler_calibration
 from fisheye.camera import CAMERA_ID_PATTERN, FisheyeCamera
-from fisheye.camera_file import CalibrationError, camera_from_opencv, read_opencv_calibration, save_camera
+from fisheye.camera_file import (
+    CalibrationError,
+    camera_from_opencv,
+    load_camera,
+    read_opencv_calibration,
+    save_camera,
+)
 from fisheye.ruler_marks import read_marks_csv
 
 _DEFAULT_ID = "camera"
@@ -30,13 +38,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="ruler marks: columns ruler,u,v,distance_m[,x_m,y_m] (distance 0 = nadir)")
     source.add_argument("--opencv", type=Path, metavar="FILE",
                         help="OpenCV fisheye calibration (FileStorage YAML/JSON, or YAML/JSON with K, D)")
-    parser.add_argument("--altitude", type=float, required=True, metavar="M",
-                        help="lens height above the floor (m)")
+    parser.add_argument("--altitude", type=float, metavar="M",
+                        help="lens height above the floor (m); required unless --check-altitude")
     parser.add_argument("--image-size", type=int, nargs=2, metavar=("W", "H"),
                         help="resolution of the frame the marks were taken on (px); for --opencv, the "
                              "frame size if the file has none (or a size to scale it to)")
-    parser.add_argument("-o", "--output", type=Path, required=True, metavar="FILE",
-                        help="camera file to write (.yaml, .yml or .json)")
+    parser.add_argument("-o", "--output", type=Path, metavar="FILE",
+                        help="camera file to write (.yaml, .yml or .json); required unless --check-altitude")
+    parser.add_argument("--check-altitude", type=Path, metavar="CAMERA",
+                        help="with --marks at known floor distances (or x, y): fit the altitude that best "
+                             "explains them with this camera file's lens and report it beside the "
+                             "configured one (writes nothing)")
     parser.add_argument("--id", dest="camera_id", metavar="ID",
                         help="camera id (default: the output file's name without suffix)")
     parser.add_argument("--coefficients", type=int, default=3, metavar="N",
@@ -52,6 +64,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="principal point (px; default: the nadir mark)")
     parser.add_argument("--fit-principal-point", action="store_true",
                         help="refine the principal point from all marks (needs rulers in 2+ directions)")
+    parser.add_argument("--fit-tilt", action="store_true",
+                        help="fit the camera's tilt from straight down (needs rulers in 3+ directions; "
+                             "fits the principal point too unless --principal-point is given)")
     parser.add_argument("--max-theta-deg", type=float, metavar="DEG",
                         help="calibrated field: rays beyond this angle from the axis get no position")
 
@@ -95,6 +110,8 @@ def describe_camera(camera: FisheyeCamera) -> str:
         f"{camera.altitude_m:g} m, principal point ({camera.principal_point[0]:.2f}, "
         f"{camera.principal_point[1]:.2f}), focal ({camera.focal_px[0]:.2f}, {camera.focal_px[1]:.2f}) px, "
         f"kb [{kb}], field {camera.theta_max_deg:g}°"
+        + ("" if camera.is_level or camera.tilt_deg is None else
+           f", tilt [{camera.tilt_deg[0]:.3f}°, {camera.tilt_deg[1]:.3f}°]")
     )
 
 
@@ -109,12 +126,13 @@ def _from_marks(args: argparse.Namespace, camera_id: str) -> FisheyeCamera:
         principal_point=tuple(args.principal_point) if args.principal_point else None,
         fit_principal_point=args.fit_principal_point,
         max_theta_deg=args.max_theta_deg,
+        fit_tilt=args.fit_tilt,
     )
     marks = read_marks_csv(args.marks)
     fit = fit_ruler_calibration(marks, args.altitude, tuple(args.image_size), camera_id, config)
     print(residual_table(fit))
     for note in fit.notes:
-        print(f"note: {note}")
+        print(f"{'warning' if note.level == 'warning' else 'note'}: {note}")
     return fit.camera
 
 
@@ -134,7 +152,28 @@ def _from_opencv(args: argparse.Namespace, camera_id: str) -> FisheyeCamera:
     return camera
 
 
+def _check_altitude(args: argparse.Namespace) -> int:
+    try:
+        if args.marks is None:
+            raise CalibrationError("--check-altitude needs --marks (marks at known floor distances)")
+        camera = load_camera(args.check_altitude)
+        if args.image_size is not None and tuple(args.image_size) != camera.image_size:
+            camera = camera.scaled_to(tuple(args.image_size))
+        check = check_altitude(camera, read_marks_csv(args.marks))
+    except (CalibrationError, OSError, ValueError) as error:
+        print(f"fishloc calibrate: error: {error}", file=sys.stderr)
+        return 2
+    print(check.report())
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.check_altitude is not None:
+        return _check_altitude(args)
+    if args.altitude is None or args.output is None:
+        print("fishloc calibrate: error: --altitude and -o/--output are required to fit or import a "
+              "camera", file=sys.stderr)
+        return 2
     camera_id = args.camera_id or _default_id(args.output)
     try:
         camera = _from_marks(args, camera_id) if args.marks else _from_opencv(args, camera_id)

@@ -15,11 +15,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from fisheye.arrays import as_points
+from fisheye.arrays import as_points, resolution_scale, scale_pixels
 from fisheye.lens import monotonic_violation, radius_to_theta, theta_to_radius
+from fisheye.masks import MAX_MASKS, points_in_masks, polygon_problem
 from fisheye.site import SitePose
+from fisheye.tilt import MAX_TILT_DEG, floor_to_lens_rays, is_level, lens_to_floor_rays, rays_to_floor
 
 FloatArray = NDArray[np.float64]
+Polygons = list[list[tuple[float, float]]]
 
 CAMERA_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
 _CAMERA_ID_RE = re.compile(CAMERA_ID_PATTERN)
@@ -60,6 +63,11 @@ class FisheyeCamera(BaseModel):
     focal_px: tuple[float, float] = Field(description="[fx, fy] (px per unit normalised radius).")
     kb: list[float] = Field(min_length=1, max_length=5, description="k1..k5 of r(θ).")
     max_theta_deg: float | None = Field(default=None, gt=0, lt=180)
+    tilt_deg: tuple[float, float] | None = Field(
+        default=None, description="[a, b]: rotation of the lens about the floor x, then y axis (deg); "
+                                  "absent or [0, 0] is a level camera.")
+    masks_px: Polygons | None = Field(
+        default=None, description="Polygons [[u, v], ...] at image_size where nobody is counted.")
     site: str | None = Field(default=None, pattern=CAMERA_ID_PATTERN,
                              description="The site (floor plan) the camera belongs to.")
     site_pose: SitePose | None = None
@@ -88,6 +96,24 @@ class FisheyeCamera(BaseModel):
             raise ValueError(f"focal_px must be positive, got {list(value)}")
         return value
 
+    @field_validator("tilt_deg")
+    @classmethod
+    def _check_tilt(cls, value: tuple[float, float] | None) -> tuple[float, float] | None:
+        if value is not None and max(abs(value[0]), abs(value[1])) > MAX_TILT_DEG:
+            raise ValueError(f"tilt_deg must lie within ±{MAX_TILT_DEG:g}° per axis, got {list(value)}")
+        return value
+
+    @field_validator("masks_px")
+    @classmethod
+    def _check_masks(cls, value: Polygons | None) -> Polygons | None:
+        if value is not None and len(value) > MAX_MASKS:
+            raise ValueError(f"masks_px may hold at most {MAX_MASKS} polygons, got {len(value)}")
+        for index, polygon in enumerate(value or []):
+            problem = polygon_problem(np.array(polygon, dtype=np.float64).reshape(-1, 2))
+            if problem is not None:
+                raise ValueError(f"mask {index + 1}: {problem}")
+        return value
+
     @model_validator(mode="after")
     def _check_geometry(self) -> FisheyeCamera:
         width, height = self.image_size
@@ -107,6 +133,15 @@ class FisheyeCamera(BaseModel):
                 f"kb {self.kb}: r(θ) is not strictly increasing on [0, {self.theta_max_deg:g}°] "
                 f"(it stops at θ = {math.degrees(bad_theta):.2f}°); lower max_theta_deg or fix kb"
             )
+        for index, polygon in enumerate(self.masks_px or []):
+            corners = np.array(polygon, dtype=np.float64)
+            # A corner may sit on the outer edge of the border pixels, half a pixel beyond their centres.
+            beyond = (corners < -0.5) | (corners > np.array([width, height]) - 0.5)
+            outside = np.flatnonzero(beyond.any(axis=1))
+            if outside.size:
+                corner = int(outside[0])
+                raise ValueError(f"mask {index + 1}: corner {corner + 1} {list(polygon[corner])} lies "
+                                 f"outside the image {width}x{height}")
         return self
 
     # ----- derived values
@@ -123,6 +158,16 @@ class FisheyeCamera(BaseModel):
     def resolution_wh(self) -> tuple[int, int]:
         return self.image_size
 
+    @property
+    def is_level(self) -> bool:
+        """Whether the optical axis points straight down (`tilt_deg` absent or [0, 0])."""
+        return is_level(self.tilt_deg)
+
+    @property
+    def _tilt(self) -> tuple[float, float] | None:
+        """`tilt_deg` of a tilted camera; None for a level one, whose rays need no rotation."""
+        return None if is_level(self.tilt_deg) else self.tilt_deg
+
     def scaled_to(self, resolution_wh: tuple[int, int]) -> FisheyeCamera:
         """This camera for frames of another resolution with the same aspect ratio.
 
@@ -132,30 +177,28 @@ class FisheyeCamera(BaseModel):
         width, height = int(resolution_wh[0]), int(resolution_wh[1])
         if (width, height) == tuple(self.image_size):
             return self
-        calib_w, calib_h = self.image_size
-        if width < 1 or height < 1:
-            raise ValueError(f"frame size must be positive, got {width}x{height}")
-        if abs(width * calib_h - height * calib_w) > _ASPECT_TOLERANCE_PX * max(calib_w, calib_h):
-            raise ValueError(
-                f"frame {width}x{height} does not have the aspect ratio of camera {self.id!r}'s "
-                f"calibration ({calib_w}x{calib_h})"
-            )
-        scale_u, scale_v = width / calib_w, height / calib_h
+        try:
+            scale = resolution_scale(self.image_size, (width, height), _ASPECT_TOLERANCE_PX)
+        except ValueError as error:
+            raise ValueError(f"camera {self.id!r}: {error} (its calibration)") from None
         u0, v0 = self.principal_point
         fx, fy = self.focal_px
-        return self.model_copy(
-            update={
-                "image_size": (width, height),
-                "principal_point": ((u0 + 0.5) * scale_u - 0.5, (v0 + 0.5) * scale_v - 0.5),
-                "focal_px": (fx * scale_u, fy * scale_v),
-            }
-        )
+        update: dict[str, object] = {
+            "image_size": (width, height),
+            "principal_point": ((u0 + 0.5) * scale[0] - 0.5, (v0 + 0.5) * scale[1] - 0.5),
+            "focal_px": (fx * scale[0], fy * scale[1]),
+        }
+        if self.masks_px:
+            update["masks_px"] = [[(float(u), float(v)) for u, v in scale_pixels(polygon, scale)]
+                                  for polygon in self.masks_px]
+        return self.model_copy(update=update)
 
     # ----- pixels <-> rays
 
     def pixels_to_angles(self, uv_px: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """(N, 2) px -> θ (N,) rad from the optical axis and φ (N,) rad, the floor-frame azimuth
-        (counter-clockwise from +x). θ is NaN outside the calibrated field (θ > θmax)."""
+        """(N, 2) px -> θ (N,) rad from the optical axis and φ (N,) rad, the lens azimuth
+        (counter-clockwise from +x; the floor-frame azimuth of a level camera). θ is NaN outside the
+        calibrated field (θ > θmax)."""
         uv = as_points(uv_px, 2, "uv_px")
         x_norm = (uv[:, 0] - self.principal_point[0]) / self.focal_px[0]
         y_norm = -(uv[:, 1] - self.principal_point[1]) / self.focal_px[1]
@@ -167,11 +210,16 @@ class FisheyeCamera(BaseModel):
         """(N, 2) px -> (N, 3) unit rays in the floor frame; NaN rows outside the calibrated field."""
         theta, phi = self.pixels_to_angles(uv_px)
         sin_theta = np.sin(theta)
-        return np.stack([sin_theta * np.cos(phi), sin_theta * np.sin(phi), -np.cos(theta)], axis=1)
+        rays = np.stack([sin_theta * np.cos(phi), sin_theta * np.sin(phi), -np.cos(theta)], axis=1)
+        tilt = self._tilt
+        return rays if tilt is None else lens_to_floor_rays(rays, tilt)
 
     def rays_to_pixels(self, rays: ArrayLike) -> FloatArray:
         """(N, 3) rays in the floor frame (any length) -> (N, 2) px; NaN rows beyond θmax."""
         directions = as_points(rays, 3, "rays")
+        tilt = self._tilt
+        if tilt is not None:
+            directions = floor_to_lens_rays(directions, tilt)
         horizontal = np.hypot(directions[:, 0], directions[:, 1])
         theta = np.arctan2(horizontal, -directions[:, 2])
         radius = theta_to_radius(theta, self.kb)
@@ -188,6 +236,9 @@ class FisheyeCamera(BaseModel):
 
     def floor_positions(self, uv_px: ArrayLike) -> FloorPoints:
         """(N, 2) px -> floor positions with distances and a validity mask (see FloorPoints)."""
+        if self._tilt is not None:
+            xy, valid = rays_to_floor(self.pixels_to_rays(uv_px), self.altitude_m)
+            return FloorPoints(xy_m=xy, distance_m=np.hypot(xy[:, 0], xy[:, 1]), valid=valid)
         theta, phi = self.pixels_to_angles(uv_px)
         valid = np.isfinite(theta) & np.isfinite(phi) & (theta < math.pi / 2)
         distance = np.full(theta.shape, np.nan)
@@ -214,6 +265,10 @@ class FisheyeCamera(BaseModel):
         camera of a site without one stands at the site's origin, unturned)."""
         pose = self.site_pose or (SitePose() if self.site is not None else None)
         return None if pose is None else pose.floor_to_site(xy_m)
+
+    def masked(self, uv_px: ArrayLike) -> NDArray[np.bool_]:
+        """(N, 2) px -> (N,) whether each pixel lies inside one of the camera's mask polygons."""
+        return points_in_masks(uv_px, self.masks_px or [])
 
     def image_circle_radius_px(self) -> float:
         """Radius (px, along u) of the calibrated field θ ≤ θmax around the principal point."""

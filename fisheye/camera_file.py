@@ -19,13 +19,19 @@ ASSUMED_ALTITUDE_M = 3.0
 
 
 class CalibrationError(ValueError):
-    """A camera file or calibration that cannot be used; the message names the field at fault."""
+    """A camera file or calibration that cannot be used; the message names the field at fault and
+    `code` says why in a stable, machine-readable word (e.g. `too_few_marks`)."""
+
+    def __init__(self, message: str, code: str = "invalid_camera") -> None:
+        super().__init__(message)
+        self.code = code
 
 
-def _describe(error: ValidationError) -> str:
+def describe_validation_error(error: ValidationError, whole: str = "camera") -> str:
+    """Every problem of a pydantic validation as `field: message`, joined by '; '."""
     parts = []
     for item in error.errors():
-        field = ".".join(str(p) for p in item["loc"]) or "camera"
+        field = ".".join(str(p) for p in item["loc"]) or whole
         parts.append(f"{field}: {item['msg']}")
     return "; ".join(parts)
 
@@ -35,7 +41,7 @@ def camera_from_dict(record: Mapping[str, Any]) -> FisheyeCamera:
     try:
         return FisheyeCamera.model_validate(dict(record))
     except ValidationError as error:
-        raise CalibrationError(f"invalid camera: {_describe(error)}") from None
+        raise CalibrationError(f"invalid camera: {describe_validation_error(error)}") from None
 
 
 def read_camera_records(path: str | Path) -> list[dict[str, Any]]:

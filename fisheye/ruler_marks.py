@@ -39,6 +39,10 @@ _DISTANCE_AGREEMENT_M = 0.01
 _DISTANCE_AGREEMENT_RELATIVE = 0.01
 
 
+def _invalid(message: str) -> CalibrationError:
+    return CalibrationError(message, code="invalid_marks")
+
+
 @dataclass(frozen=True)
 class RulerMarks:
     """N marks: `uv_px` (N, 2) px, `distance_m` (N,) m from the nadir, `xy_m` (N, 2) m floor
@@ -52,25 +56,25 @@ class RulerMarks:
     def __post_init__(self) -> None:
         n = len(self.distance_m)
         if self.uv_px.shape != (n, 2) or self.xy_m.shape != (n, 2) or len(self.ruler) != n:
-            raise CalibrationError(
+            raise _invalid(
                 f"marks disagree in length: uv_px {self.uv_px.shape}, distance_m {self.distance_m.shape}, "
                 f"xy_m {self.xy_m.shape}, ruler {len(self.ruler)}"
             )
         for i in range(n):
             where = f"mark {i + 1} (ruler {self.ruler[i]!r})"
             if not np.isfinite(self.uv_px[i]).all():
-                raise CalibrationError(f"{where}: u, v must be finite pixel coordinates")
+                raise _invalid(f"{where}: u, v must be finite pixel coordinates")
             if not (math.isfinite(self.distance_m[i]) and self.distance_m[i] >= 0):
-                raise CalibrationError(f"{where}: distance_m must be a finite number ≥ 0, "
+                raise _invalid(f"{where}: distance_m must be a finite number ≥ 0, "
                                        f"got {self.distance_m[i]}")
             has_xy = np.isfinite(self.xy_m[i])
             if has_xy.any() and not has_xy.all():
-                raise CalibrationError(f"{where}: give both x_m and y_m or neither")
+                raise _invalid(f"{where}: give both x_m and y_m or neither")
             if has_xy.all():
                 norm = float(np.hypot(*self.xy_m[i]))
                 allowed = max(_DISTANCE_AGREEMENT_M, _DISTANCE_AGREEMENT_RELATIVE * norm)
                 if abs(norm - self.distance_m[i]) > allowed:
-                    raise CalibrationError(
+                    raise _invalid(
                         f"{where}: |(x_m, y_m)| = {norm:.3f} m disagrees with distance_m = "
                         f"{self.distance_m[i]:.3f} m"
                     )
@@ -89,7 +93,7 @@ class RulerMarks:
         xy = np.full((n, 2), np.nan) if xy_m is None else np.array(xy_m, dtype=np.float64).reshape(-1, 2)
         if distance_m is None:
             if xy_m is None:
-                raise CalibrationError("marks need distance_m or xy_m")
+                raise _invalid("marks need distance_m or xy_m")
             distance = np.hypot(xy[:, 0], xy[:, 1])
         else:
             distance = np.array(distance_m, dtype=np.float64).reshape(-1)
@@ -117,9 +121,9 @@ def _number(row: dict[str, str], column: str, line: int, source: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise CalibrationError(f"{source} line {line}: {column} must be a number, got {text!r}") from None
+        raise _invalid(f"{source} line {line}: {column} must be a number, got {text!r}") from None
     if not math.isfinite(value):
-        raise CalibrationError(f"{source} line {line}: {column} must be finite, got {text!r}")
+        raise _invalid(f"{source} line {line}: {column} must be finite, got {text!r}")
     return value
 
 
@@ -128,43 +132,43 @@ def parse_marks_csv(text: str, source: str = "marks.csv") -> RulerMarks:
     lines = [(i + 1, line) for i, line in enumerate(text.splitlines())
              if line.strip() and not line.lstrip().startswith("#")]
     if not lines:
-        raise CalibrationError(f"{source} is empty")
+        raise _invalid(f"{source} is empty")
     reader = csv.DictReader(io.StringIO("\n".join(line for _, line in lines)), skipinitialspace=True)
     header = [name.strip() for name in reader.fieldnames or []]
     reader.fieldnames = header
     unknown = [name for name in header if name not in MARK_COLUMNS]
     if unknown:
-        raise CalibrationError(f"{source}: unknown column(s) {unknown}; columns are {list(MARK_COLUMNS)}")
+        raise _invalid(f"{source}: unknown column(s) {unknown}; columns are {list(MARK_COLUMNS)}")
     for required in ("u", "v"):
         if required not in header:
-            raise CalibrationError(f"{source}: column {required!r} is missing")
+            raise _invalid(f"{source}: column {required!r} is missing")
     if "distance_m" not in header and not {"x_m", "y_m"} <= set(header):
-        raise CalibrationError(f"{source}: needs a distance_m column or x_m and y_m columns")
+        raise _invalid(f"{source}: needs a distance_m column or x_m and y_m columns")
     uv, distance, xy, labels = [], [], [], []
     for (line, _), row in zip(lines[1:], reader, strict=True):
         if None in row:
-            raise CalibrationError(f"{source} line {line}: more fields than the header names")
+            raise _invalid(f"{source} line {line}: more fields than the header names")
         u, v = _number(row, "u", line, source), _number(row, "v", line, source)
         if math.isnan(u) or math.isnan(v):
-            raise CalibrationError(f"{source} line {line}: u and v are required")
+            raise _invalid(f"{source} line {line}: u and v are required")
         point = (_number(row, "x_m", line, source), _number(row, "y_m", line, source))
         d = _number(row, "distance_m", line, source)
         if math.isnan(d):
             if math.isnan(point[0]) or math.isnan(point[1]):
-                raise CalibrationError(f"{source} line {line}: give distance_m or both x_m and y_m")
+                raise _invalid(f"{source} line {line}: give distance_m or both x_m and y_m")
             d = math.hypot(*point)
         if d < 0:
-            raise CalibrationError(f"{source} line {line}: distance_m must be ≥ 0, got {d}")
+            raise _invalid(f"{source} line {line}: distance_m must be ≥ 0, got {d}")
         uv.append((u, v))
         distance.append(d)
         xy.append(point)
         labels.append((row.get("ruler") or "").strip())
     if not uv:
-        raise CalibrationError(f"{source} has a header but no marks")
+        raise _invalid(f"{source} has a header but no marks")
     try:
         return RulerMarks(np.array(uv), np.array(distance), np.array(xy), tuple(labels))
     except CalibrationError as error:
-        raise CalibrationError(f"{source}: {error}") from None
+        raise _invalid(f"{source}: {error}") from None
 
 
 def read_marks_csv(path: str | Path) -> RulerMarks:
@@ -173,7 +177,7 @@ def read_marks_csv(path: str | Path) -> RulerMarks:
     try:
         text = file.read_text(encoding="utf-8")
     except OSError as error:
-        raise CalibrationError(f"cannot read marks file {file}: {error.strerror}") from None
+        raise _invalid(f"cannot read marks file {file}: {error.strerror}") from None
     return parse_marks_csv(text, source=str(file))
 
 
@@ -190,7 +194,7 @@ def simulate_ruler_marks(
     displaced by Gaussian noise of `noise_px` per axis. For planning a calibration and for tests."""
     rng = np.random.default_rng(seed)
     distances = np.asarray(distances_m, dtype=np.float64).reshape(-1)
-    uv = [np.zeros((1, 2)) + camera.principal_point]
+    uv = [camera.floor_to_pixels(np.zeros((1, 2)))]  # the principal point, unless the camera is tilted
     distance, xy, labels = [np.zeros(1)], [np.zeros((1, 2))], ["nadir"]
     for direction in np.asarray(directions_deg, dtype=np.float64).reshape(-1):
         unit = np.array([math.cos(math.radians(direction)), math.sin(math.radians(direction))])

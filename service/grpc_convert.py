@@ -118,6 +118,10 @@ def camera_to_message(camera: FisheyeCamera) -> pb.Camera:
         message.site_pose.CopyFrom(pb.SitePose(**record["site_pose"]))
     if camera.site is not None:
         message.site = camera.site
+    if camera.tilt_deg is not None:
+        message.tilt_deg.CopyFrom(pb.Point(x=camera.tilt_deg[0], y=camera.tilt_deg[1]))
+    for polygon in camera.masks_px or []:
+        message.masks_px.append(pb.Polygon(points=[pb.Point(x=u, y=v) for u, v in polygon]))
     return message
 
 
@@ -136,6 +140,11 @@ def message_to_camera(message: pb.Camera) -> FisheyeCamera:
         record["site_pose"] = {"x_m": pose.x_m, "y_m": pose.y_m, "yaw_deg": pose.yaw_deg}
     if message.HasField("site"):
         record["site"] = message.site
+    if message.HasField("tilt_deg"):
+        record["tilt_deg"] = [message.tilt_deg.x, message.tilt_deg.y]
+    if message.masks_px:
+        record["masks_px"] = [[[point.x, point.y] for point in polygon.points]
+                              for polygon in message.masks_px]
     return camera_from_dict(record)
 
 

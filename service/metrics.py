@@ -48,6 +48,10 @@ class ServiceMetrics:
         self.detections = Counter(
             "fishloc_detections", "People detected per camera.", ["camera_id"], registry=self.registry,
         )
+        self.masked = Counter(
+            "fishloc_masked_detections", "Detections dropped because their foot point lies in one of "
+            "the camera's masks (mirrors, posters, screens).", ["camera_id"], registry=self.registry,
+        )
         self.frame_errors = Counter(
             "fishloc_frame_errors", "Frames refused by the pipeline, by error code.", ["code"],
             registry=self.registry,
@@ -103,6 +107,7 @@ class ServiceMetrics:
         camera = self.camera_label(result.camera_id)
         self.frames.labels(camera_id=camera, frontend=frontend).inc()
         self.detections.labels(camera_id=camera).inc(len(result.detections))
+        self.masked.labels(camera_id=camera).inc(result.masked)
 
     def site_label(self, site_id: str) -> str:
         """`site_id`, or `_other` once MAX_SITE_LABELS distinct sites have been labelled."""

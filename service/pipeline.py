@@ -3,7 +3,8 @@
 decode (reduced-scale JPEG where the model input allows) -> the model's view of the frame
 (letterbox or polar unwrap, `contract.views`) -> ONNX model -> score threshold, boxes back to frame
 pixels and rotated NMS about the camera's own principal point (`contract.detect`) -> foot points ->
-floor and site positions. Torch-free: only numpy, OpenCV, onnxruntime, `fisheye` and `contract`.
+floor and site positions -> the camera's masks (a foot point inside one drops its detection).
+Torch-free: only numpy, OpenCV, onnxruntime, `fisheye` and `contract`.
 """
 
 from __future__ import annotations
@@ -70,6 +71,15 @@ def localize(boxes_frame: FloatArray, scores: FloatArray, camera: FisheyeCamera,
     )
 
 
+def drop_masked(detections: Detections, camera: FisheyeCamera) -> tuple[Detections, int]:
+    """The detections whose foot point lies outside every mask of `camera` (already scaled to the
+    frame), and how many were dropped: people seen in mirrors, posters and screens stand nowhere."""
+    if not camera.masks_px or len(detections) == 0:
+        return detections, 0
+    inside = camera.masked(detections.foot_px)
+    return detections.take(~inside), int(inside.sum())
+
+
 class Pipeline:
     """A loaded model and its post-processing; `detect` is safe to call from several threads."""
 
@@ -115,7 +125,8 @@ class Pipeline:
         inferred = time.perf_counter()
 
         kept = self.select(raw, mapping, threshold, frame_camera)
-        detections = localize(kept.boxes_cxcywh, kept.scores, frame_camera, kept.foot_px)
+        detections, masked = drop_masked(
+            localize(kept.boxes_cxcywh, kept.scores, frame_camera, kept.foot_px), frame_camera)
         done = time.perf_counter()
         timing_ms = {
             "decode": (decoded - start) * 1e3,
@@ -127,7 +138,7 @@ class Pipeline:
         result = DetectionResult(
             camera_id=camera.id, frame_id=frame_id, image_wh=frame.frame_wh,
             model_name=self.info.name, model_version=self.info.version,
-            detections=detections, timing_ms=timing_ms,
+            detections=detections, timing_ms=timing_ms, masked=masked,
         )
         log.debug("frame %s of %s: %d detections in %.1f ms", frame_id, camera.id, len(detections.scores),
                   timing_ms["total"], extra={"camera_id": camera.id, "frame_id": frame_id})

@@ -37,6 +37,18 @@ def _too_large(message: str) -> ApiError:
     return ApiError(413, "payload_too_large", message, headers=CLOSE)
 
 
+async def read_json(request: Request, limits: BodyLimits, what: str) -> Any:
+    """The body parsed as JSON, or ApiError 400 `bad_json` naming `what` the body should have been
+    (and the errors of read_body)."""
+    body = await read_body(request, limits)
+    try:
+        return json.loads(body)
+    except ValueError as error:  # JSONDecodeError, UnicodeDecodeError, an int of too many digits
+        raise ApiError(400, "bad_json", f"the body is not JSON: {error}") from None
+    except RecursionError:
+        raise ApiError(400, "bad_json", f"the body is not {what}: JSON nested too deeply") from None
+
+
 async def read_body(request: Request, limits: BodyLimits) -> bytes:
     """The whole body, or ApiError 413 (too large), 408 (too slow) or 400 (client went away)."""
     declared = request.headers.get("content-length")
@@ -64,13 +76,7 @@ async def read_body(request: Request, limits: BodyLimits) -> bytes:
 async def read_json_object(request: Request, limits: BodyLimits, what: str, code: str) -> dict[str, Any]:
     """A body that must be one JSON object (`what`, e.g. "a camera record"): 400 `bad_json` when it
     is not JSON, 422 `code` when it is JSON but not an object."""
-    body = await read_body(request, limits)
-    try:
-        record = json.loads(body)
-    except ValueError as error:  # JSONDecodeError, UnicodeDecodeError, an int of too many digits
-        raise ApiError(400, "bad_json", f"the body is not JSON: {error}") from None
-    except RecursionError:
-        raise ApiError(400, "bad_json", f"the body is not {what}: JSON nested too deeply") from None
+    record = await read_json(request, limits, what)
     if not isinstance(record, dict):
         raise ApiError(422, code, f"the body must be a JSON object ({what})")
     return record

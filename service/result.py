@@ -58,6 +58,15 @@ class Detections:
     def __len__(self) -> int:
         return len(self.scores)
 
+    def take(self, keep: NDArray[np.bool_]) -> Detections:
+        """The people where `keep` (N,) is True, in the same order."""
+        return Detections(
+            scores=self.scores[keep], cxcywh=self.cxcywh[keep], angle_deg=self.angle_deg[keep],
+            corners_xy=self.corners_xy[keep], foot_px=self.foot_px[keep], position_m=self.position_m[keep],
+            distance_m=self.distance_m[keep],
+            site_position_m=None if self.site_position_m is None else self.site_position_m[keep],
+        )
+
     @classmethod
     def empty(cls, with_site: bool) -> Detections:
         return cls(
@@ -69,7 +78,8 @@ class Detections:
 
 @dataclass(frozen=True)
 class DetectionResult:
-    """One frame's answer: who is where, for which camera and model, and how long each stage took."""
+    """One frame's answer: who is where, for which camera and model, how long each stage took, and
+    how many detections the camera's masks dropped."""
 
     camera_id: str
     frame_id: str | None
@@ -78,6 +88,7 @@ class DetectionResult:
     model_version: str
     detections: Detections
     timing_ms: dict[str, float] = field(default_factory=dict)
+    masked: int = 0  # detections dropped because their foot point fell inside one of the camera's masks
     # For a camera of a site: (N,) the confirmed track of each detection (None: not (yet) tracked).
     track_ids: tuple[str | None, ...] | None = None
 

@@ -72,6 +72,36 @@ class DetectResponse(BaseModel):
     timing_ms: Timing
 
 
+class FitNote(BaseModel):
+    code: str = Field(description="stable reason, e.g. tilt_undetermined, marks_short, monotonic_constraint")
+    level: str = Field(description="info or warning")
+    message: str
+
+
+class MarkResidual(BaseModel):
+    ruler: str
+    u: float
+    v: float
+    distance_m: float | None
+    x_m: float | None
+    y_m: float | None
+    fitted_distance_m: float | None = Field(description="the fitted camera's floor distance of the pixel (m)")
+    err_m: float | None = Field(description="fitted minus ruler distance (m)")
+    pos_err_m: float | None = Field(description="floor position error (m), for marks with x_m, y_m")
+    err_px: float | None = Field(description="marked pixel to the fitted camera's pixel of the mark (px)")
+
+
+class CalibrationFit(BaseModel):
+    camera: FisheyeCamera = Field(description="the fitted camera file (not saved)")
+    marks: list[MarkResidual]
+    rms_m: float | None
+    rms_px: float | None
+    max_abs_m: float | None
+    theta_max_marked_deg: float
+    monotonic_constrained: bool
+    notes: list[FitNote]
+
+
 class CameraList(BaseModel):
     cameras: list[FisheyeCamera]
 

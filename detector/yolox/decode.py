@@ -13,8 +13,9 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor, nn
 
+from detector.yolox.foot import foot_from_offsets
 from detector.yolox.head import CLASSES_START, OBJECTNESS
-from detector.yolox.network import STRIDES
+from detector.yolox.network import STRIDES, YoloxNano
 
 
 def flatten_maps(maps: Sequence[Tensor]) -> Tensor:
@@ -58,14 +59,24 @@ def class_scores(decoded: Tensor) -> Tensor:
     return decoded[..., OBJECTNESS:CLASSES_START] * decoded[..., CLASSES_START:]
 
 
-def top_people(net: nn.Module, image: Tensor, max_detections: int) -> tuple[Tensor, Tensor]:
+def top_people(net: nn.Module, image: Tensor, max_detections: int) -> tuple[Tensor, Tensor, Tensor | None]:
     """(N, H, W, 3) uint8 RGB images -> the `max_detections` cells of highest objectness x
-    p(person): boxes (N, K, 4) `cxcywh` in YOLOX's edge coordinates (pixel i spans [i, i + 1)) and
-    scores (N, K) descending. What both views' ONNX graphs compute before their own box layout."""
+    p(person): boxes (N, K, 4) `cxcywh` in YOLOX's edge coordinates (pixel i spans [i, i + 1)),
+    scores (N, K) descending and, for a network with a foot branch, their foot points (N, K, 2) in
+    the same coordinates (else None). What both views' ONNX graphs compute before their own box
+    layout."""
     bgr = image.permute(0, 3, 1, 2).flip(1).float()  # (N, 3, H, W) BGR 0-255, as YOLOX was trained
-    decoded = decode(net(bgr))  # (N, A, 5 + C): cxcywh px, objectness, classes
+    offsets: list[Tensor] | None = None
+    if isinstance(net, YoloxNano) and net.foot is not None:
+        maps, offsets = net.forward_with_foot(bgr)
+    else:
+        maps = net(bgr)
+    decoded = decode(maps)  # (N, A, 5 + C): cxcywh px, objectness, classes
     scores = class_scores(decoded)[..., 0]  # (N, A) person
     k = min(max_detections, scores.shape[1])
     top_scores, top = torch.topk(scores, k, dim=1)  # (N, K)
     cxcywh = torch.gather(decoded[..., :4], 1, top[..., None].expand(-1, -1, 4))  # (N, K, 4)
-    return cxcywh, top_scores
+    if offsets is None:
+        return cxcywh, top_scores, None
+    ab = torch.gather(flatten_maps(offsets), 1, top[..., None].expand(-1, -1, 2))  # (N, K, 2)
+    return cxcywh, top_scores, foot_from_offsets(ab, cxcywh)

@@ -46,7 +46,13 @@ from detector.yolox.loss import PolarDetectionLoss, PolarLossConfig
 from detector.yolox.network import YoloxNano
 from detector.yolox.polar import ARCH as POLAR_ARCH
 from detector.yolox.polar import PolarDetectorConfig
-from detector.yolox.strips import PolarStripDataset, StripAugment, YoloxSample, collate_strips
+from detector.yolox.strips import (
+    PolarStripDataset,
+    StripAugment,
+    YoloxSample,
+    collate_feet,
+    collate_strips,
+)
 
 LOG_FILE = "log.jsonl"
 LAST = "last.pt"
@@ -220,16 +226,25 @@ class Finetuner:
         return [order[i:i + size] for i in range(0, len(order), size)]
 
     def train_step(self, indices: list[int]) -> dict[str, float]:
-        images, labels = collate_strips([self.train_set[i] for i in indices])
+        samples = [self.train_set[i] for i in indices]
+        images, labels = collate_strips(samples)
         images = images.to(self.device)
-        with torch.no_grad():
-            teacher_maps = self.teacher(images)
-        terms = self.loss(self.model(images), labels, teacher_maps)
+        teacher_maps = None
+        if self.config.distill > 0:
+            with torch.no_grad():
+                teacher_maps = self.teacher(images)
+        feet = collate_feet(samples) if self.model.foot is not None else None
+        if feet is not None:
+            maps, offsets = self.model.forward_with_foot(images)
+            terms = self.loss(maps, labels, teacher_maps, offsets, feet)
+        else:
+            terms = self.loss(self.model(images), labels, teacher_maps)
         self.optimizer.zero_grad(set_to_none=True)
-        terms["total"].backward()
-        torch.nn.utils.clip_grad_norm_([p for p in self.model.parameters() if p.requires_grad],
-                                       self.config.grad_clip)
-        self.optimizer.step()
+        if terms["total"].requires_grad:  # not when only the foot trains and no label has a floor point
+            terms["total"].backward()
+            torch.nn.utils.clip_grad_norm_([p for p in self.model.parameters() if p.requires_grad],
+                                           self.config.grad_clip)
+            self.optimizer.step()
         self.scheduler.step()
         self.step += 1
         return {k: v.item() for k, v in terms.items()}

@@ -68,6 +68,6 @@ class FisheyeContract(nn.Module):
         self.max_detections = max_detections
 
     def forward(self, image: Tensor) -> tuple[Tensor, Tensor]:
-        cxcywh, scores = top_people(self.net, image, self.max_detections)  # (N, K, 4), (N, K)
+        cxcywh, scores, _ = top_people(self.net, image, self.max_detections)  # (N, K, 4), (N, K)
         return torch.cat([cxcywh[..., :2] - EDGE_TO_CENTRE_PX, cxcywh[..., 2:]], dim=-1), scores
 

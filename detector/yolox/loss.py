@@ -16,7 +16,9 @@ Terms, each summed and divided by the number of positives (as YOLOX does):
 `class` BCE of the person logit at positives against the (detached) IoU of the prediction, and
 `distill` the binary KL divergence KL(teacher ‖ student) of objectness·p(person) on every cell that
 is not inside a label's box: zero exactly when the student scores every such cell as the frozen
-COCO network does. `total` = iou_weight·iou + objectness + class + distill_weight·distill.
+COCO network does. For a network with a foot branch, `foot` is the metres-weighted L1 error of the
+positives' foot points (`detector.yolox.foot.foot_loss`) divided by the positives that have a floor
+point. `total` = iou_weight·iou + objectness + class + distill_weight·distill + foot_weight·foot.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from torch import Tensor
 from torch.nn import functional
 
 from detector.yolox.decode import cell_grid, flatten_maps
+from detector.yolox.foot import foot_loss
 from detector.yolox.head import CLASSES_START, OBJECTNESS
 from detector.yolox.network import STRIDES
 
@@ -40,6 +43,7 @@ EPS = 1e-7
 class PolarLossConfig:
     iou_weight: float = 5.0
     distill_weight: float = 1.0  # λ of the distillation term
+    foot_weight: float = 1.0  # of the foot term (per metre of error)
     centre_radius: float = 2.5  # strides
 
 
@@ -139,8 +143,14 @@ class PolarDetectionLoss:
         self.config = config or PolarLossConfig()
 
     def __call__(self, maps: Sequence[Tensor], labels_xyxy: Sequence[Tensor],
-                 teacher_maps: Sequence[Tensor] | None = None) -> dict[str, Tensor]:
+                 teacher_maps: Sequence[Tensor] | None = None, foot_offsets: Sequence[Tensor] | None = None,
+                 feet: Sequence[Tensor] | None = None) -> dict[str, Tensor]:
+        """`foot_offsets` the foot branch's maps and `feet` (N_i, 3) per image (targets of
+        `detector.yolox.foot.foot_loss`) add the `foot` term; both or neither."""
+        if (foot_offsets is None) != (feet is None):
+            raise ValueError("the foot term needs both the foot maps and the feet")
         flat = flatten_maps(maps)  # (B, A, 5 + C)
+        offsets = None if foot_offsets is None else flatten_maps(foot_offsets)  # (B, A, 2)
         B, A, _ = flat.shape
         anchors = anchors_of(maps)
         boxes = decode_boxes(flat, anchors)  # (B, A, 4)
@@ -148,7 +158,8 @@ class PolarDetectionLoss:
         distill_mask = torch.ones(B, A, dtype=torch.bool, device=flat.device)
         iou_sum = flat.new_zeros(())
         class_sum = flat.new_zeros(())
-        positives = 0
+        foot_sum = flat.new_zeros(())
+        positives = foot_count = 0
         for b, labels in enumerate(labels_xyxy):
             labels = labels.to(flat.device, flat.dtype)
             owner = assign(anchors, labels, self.config.centre_radius)  # (A,)
@@ -168,6 +179,10 @@ class PolarDetectionLoss:
             class_target = iou.detach().clamp(min=0.0)
             class_sum = class_sum + functional.binary_cross_entropy_with_logits(
                 flat[b, fg, CLASSES_START], class_target, reduction="sum")
+            if offsets is not None and feet is not None:
+                targets = feet[b].to(flat.device, flat.dtype)[owner[fg]]  # (P, 3)
+                image_sum, image_count = foot_loss(offsets[b, fg], boxes[b, fg], targets)
+                foot_sum, foot_count = foot_sum + image_sum, foot_count + image_count
         norm = float(max(positives, 1))
         objectness = functional.binary_cross_entropy_with_logits(flat[..., OBJECTNESS], objectness_target,
                                                         reduction="sum") / norm
@@ -177,7 +192,8 @@ class PolarDetectionLoss:
         else:
             distill = flat.new_zeros(())
         terms = {"iou": iou_sum / norm, "objectness": objectness, "class": class_sum / norm,
-                 "distill": distill}
+                 "distill": distill, "foot": foot_sum / float(max(foot_count, 1))}
         terms["total"] = (self.config.iou_weight * terms["iou"] + terms["objectness"] + terms["class"]
-                          + self.config.distill_weight * terms["distill"])
+                          + self.config.distill_weight * terms["distill"]
+                          + self.config.foot_weight * terms["foot"])
         return terms

@@ -17,6 +17,7 @@ import torch
 from torch import Tensor, nn
 
 from detector.yolox.backbone import CSPDarknet
+from detector.yolox.foot import FootHead
 from detector.yolox.head import YoloxHead
 from detector.yolox.neck import PAFPN
 
@@ -34,6 +35,7 @@ class YoloxConfig:
     depthwise: bool = True  # depthwise-separable 3x3 convolutions outside the stem
     prior_prob: float = 0.01  # initial objectness and class probability of an untrained head
     model_name: str = "yolox-nano"
+    foot: bool = False  # a foot branch on the box branch (detector.yolox.foot)
 
     def __post_init__(self) -> None:
         if self.num_classes < 1:
@@ -76,12 +78,31 @@ class YoloxNano(nn.Module):
         self.neck = PAFPN(config.level_channels, config.neck_depth, config.depthwise)
         self.head = YoloxHead(config.num_classes, config.level_channels, config.head_width,
                               config.depthwise, config.prior_prob)
+        self.foot = FootHead(config.head_width, len(STRIDES), config.depthwise) if config.foot else None
 
     def forward(self, images: Tensor) -> list[Tensor]:
         features = self.backbone(images)  # strides 8, 16, 32
         fused = self.neck(features)  # same shapes
         maps: list[Tensor] = self.head(fused)  # (B, 5 + C, H/s, W/s) per stride s
         return maps
+
+    def forward_with_foot(self, images: Tensor) -> tuple[list[Tensor], list[Tensor]]:
+        """The maps and the foot offsets (B, 2, H/s, W/s) per stride s (a network with a foot branch)."""
+        if self.foot is None:
+            raise ValueError("this network has no foot branch (YoloxConfig.foot)")
+        maps, box_features = self.head.forward_features(self.neck(self.backbone(images)))
+        offsets: list[Tensor] = self.foot(box_features)
+        return maps, offsets
+
+    def with_foot(self) -> YoloxNano:
+        """A copy with a new foot branch (answering the box-side foot point until trained); every
+        other weight is copied unchanged."""
+        footed = YoloxNano(replace(self.config, foot=True))
+        missing, unexpected = footed.load_state_dict(self.state_dict(), strict=False)
+        if unexpected or not all(key.startswith("foot.") for key in missing):
+            raise ValueError(f"with_foot: unexpected weights {unexpected}, missing {missing}")
+        device = next(self.parameters()).device
+        return footed.to(device).train(self.training)
 
     def to_person_only(self) -> YoloxNano:
         """A copy that predicts COCO's person class alone (C = 1), e.g. to fine-tune and export."""
@@ -115,7 +136,8 @@ class DetectorConfigRecord:
 
     @property
     def yolox(self) -> YoloxConfig:
-        return YoloxConfig(num_classes=self.num_classes, depth=self.depth, width=self.width)
+        return YoloxConfig(num_classes=self.num_classes, depth=self.depth, width=self.width,
+                           foot=bool(getattr(self, "foot", False)))
 
     def to_dict(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in fields(self)}  # type: ignore[arg-type]

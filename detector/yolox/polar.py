@@ -43,6 +43,7 @@ class PolarDetectorConfig(DetectorConfigRecord):
     # Design (c): > 0 gives the network a second head for the cells of the bottom rows, the disc
     # within this fraction of the strip's radius (detector.yolox.inner_head); 0: one head.
     inner_fraction: float = 0.0
+    foot: bool = False  # a foot output: each box's floor-contact point (detector.yolox.foot)
 
     def __post_init__(self) -> None:
         if self.input_size % 32 or (self.polar_width + self.polar_overlap) % 32:
@@ -53,6 +54,8 @@ class PolarDetectorConfig(DetectorConfigRecord):
         PolarSpec(self.polar_width, self.polar_overlap, self.polar_max_theta_deg)  # checks the strip
         if not 0.0 <= self.inner_fraction < 1.0:
             raise ValueError(f"inner_fraction must lie in [0, 1), got {self.inner_fraction}")
+        if self.foot and self.inner_fraction > 0:
+            raise ValueError("a foot branch and an inner-disc head are not built together")
 
     @property
     def strip_wh(self) -> tuple[int, int]:
@@ -76,17 +79,21 @@ def build_polar_network(config: PolarDetectorConfig) -> YoloxNano:
 
 class PolarContract(nn.Module):
     """(N, H, W, 3) uint8 RGB strips -> boxes (N, K, 4) float32 `xyxy` strip px (pixel centres at
-    integers), scores (N, K) float32 descending: objectness x p(person) of the top K cells."""
+    integers), scores (N, K) float32 descending: objectness x p(person) of the top K cells, and for
+    a network with a foot branch `foot` (N, K, 2) strip px."""
 
     def __init__(self, net: YoloxNano, max_detections: int) -> None:
         super().__init__()
         self.net = net
         self.max_detections = max_detections
 
-    def forward(self, image: Tensor) -> tuple[Tensor, Tensor]:
-        cxcywh, scores = top_people(self.net, image, self.max_detections)  # (N, K, 4), (N, K)
+    def forward(self, image: Tensor) -> tuple[Tensor, ...]:
+        cxcywh, scores, foot = top_people(self.net, image, self.max_detections)  # (N, K, 4), (N, K)
         centre, half = cxcywh[..., :2] - EDGE_TO_CENTRE_PX, cxcywh[..., 2:] / 2
-        return torch.cat([centre - half, centre + half], dim=-1), scores
+        boxes = torch.cat([centre - half, centre + half], dim=-1)
+        if foot is None:
+            return boxes, scores
+        return boxes, scores, foot - EDGE_TO_CENTRE_PX  # (N, K, 2) strip px
 
 
 class YoloxSize(Protocol):
@@ -114,6 +121,8 @@ def init_from_pretrained(path: str, config: YoloxSize) -> YoloxNano:
                          f"{coco.config.width}; the config asks for {config.depth}, {config.width} with "
                          f"{config.num_classes} classes (a person detector has 1)")
     person = keep_classes(coco, [PERSON])
+    if isinstance(config, PolarDetectorConfig) and config.foot:
+        return person.with_foot()
     if isinstance(config, PolarDetectorConfig) and config.inner_fraction > 0:
         from detector.yolox.inner_head import InnerHeadYolox
 

@@ -34,6 +34,7 @@ from contract.detect import reduce_like_decode
 from contract.views import min_decoded_side, polar_grid, prepare_input
 from detector.data.dataset import load_rgb
 from detector.data.readers import FrameAnnotations
+from detector.yolox.foot import strip_feet
 from detector.yolox.polar import EDGE_TO_CENTRE_PX, PolarDetectorConfig
 from fisheye.polar import PolarGrid
 
@@ -80,12 +81,14 @@ def full_turn_mask(grid: PolarGrid, xyxy: FloatArray) -> NDArray[np.bool_]:
     return (xyxy[:, 2] - xyxy[:, 0]) >= grid.width - 1e-9
 
 
-def place_labels(xyxy: FloatArray, width: int, strip_wh: tuple[int, int]) -> FloatArray:
+def label_copies(xyxy: FloatArray, width: int, strip_wh: tuple[int, int]
+                 ) -> tuple[FloatArray, NDArray[np.int64], FloatArray]:
     """(N, 4) strip boxes with first-turn centres -> (M, 4) label copies in the strip: each box and
     its copy one turn (`width` columns) to the right, kept where ≥ MIN_VISIBLE of it lies inside
-    [−0.5, W − 0.5] × [−0.5, H − 0.5], clipped to it. Pixel-centre coordinates."""
+    [−0.5, W − 0.5] × [−0.5, H − 0.5], clipped to it; with each copy's source box (M,) and the
+    columns it was moved by (M,). Pixel-centre coordinates."""
     if len(xyxy) == 0:
-        return np.zeros((0, 4))
+        return np.zeros((0, 4)), np.zeros(0, dtype=np.int64), np.zeros(0)
     copies = np.concatenate([xyxy, xyxy + np.array([width, 0.0, width, 0.0])])
     low, high = np.array([-0.5, -0.5]), np.array(strip_wh, dtype=np.float64) - 0.5
     clipped = np.concatenate([np.clip(copies[:, :2], low, high), np.clip(copies[:, 2:], low, high)], axis=1)
@@ -93,14 +96,22 @@ def place_labels(xyxy: FloatArray, width: int, strip_wh: tuple[int, int]) -> Flo
     sides = clipped[:, 2:] - clipped[:, :2]
     visible = np.prod(np.maximum(sides, 0.0), axis=1) / area
     keep = (visible >= MIN_VISIBLE) & np.all(sides >= MIN_SIDE_PX, axis=1)
-    return clipped[keep]
+    source = np.tile(np.arange(len(xyxy)), 2)
+    moved = np.repeat([0.0, float(width)], len(xyxy))
+    return clipped[keep], source[keep], moved[keep]
+
+
+def place_labels(xyxy: FloatArray, width: int, strip_wh: tuple[int, int]) -> FloatArray:
+    """The label copies of `label_copies`, alone."""
+    return label_copies(xyxy, width, strip_wh)[0]
 
 
 def frame_strip(frame: FrameAnnotations, info: ModelInfo, radius_scale: float = 1.0
-                ) -> tuple[NDArray[np.uint8], FloatArray, int]:
+                ) -> tuple[NDArray[np.uint8], FloatArray, FloatArray, int]:
     """A frame -> its full-turn strip (H, width, 3) RGB at start angle 0 (the served one, its radius
-    times `radius_scale`), its labels (N, 4) strip px (first-turn centres, full turns left out) and
-    how many full-turn labels were left out."""
+    times `radius_scale`), its labels (N, 4) strip px (first-turn centres, full turns left out),
+    their feet (N, 3) (`detector.yolox.foot.strip_feet`: strip px and metres per px, NaN where
+    unknown) and how many full-turn labels were left out."""
     if frame.camera is None or info.polar is None:
         raise ValueError(f"{frame.path}: polar strips need the frame's camera and a polar model")
     camera = frame.camera
@@ -117,7 +128,8 @@ def frame_strip(frame: FrameAnnotations, info: ModelInfo, radius_scale: float = 
         strip = grid.unwrap(reduced, scale_xy, info.pad_value)
     xyxy = grid.radius_aligned_to_polar(frame.boxes_cxcywh).reshape(-1, 4)
     full = full_turn_mask(grid, xyxy)
-    return strip, xyxy[~full], int(full.sum())
+    feet = strip_feet(grid, camera, frame.locations_m[~full], xyxy[~full])
+    return strip, xyxy[~full], feet, int(full.sum())
 
 
 def roll_strip(strip: NDArray[np.uint8], xyxy: FloatArray, shift: int, overlap: int
@@ -183,14 +195,19 @@ def photometric(image: NDArray[np.uint8], augment: Photometric, rng: np.random.G
 
 @dataclass(frozen=True)
 class StripSample:
-    """One strip: `image` (H, W, 3) uint8 RGB, `labels_xyxy` (N, 4) YOLOX coordinates (edge px)."""
+    """One strip: `image` (H, W, 3) uint8 RGB, `labels_xyxy` (N, 4) YOLOX coordinates (edge px)
+    and each label's foot `feet` (N, 3): x, y in the same coordinates and metres per px, NaN rows
+    where unknown."""
 
     image: NDArray[np.uint8]
     labels_xyxy: FloatArray
+    feet: FloatArray
 
     def __post_init__(self) -> None:
-        if self.image.ndim != 3 or self.labels_xyxy.ndim != 2 or self.labels_xyxy.shape[1] != 4:
-            raise ValueError(f"image {self.image.shape}, labels {self.labels_xyxy.shape}")
+        if (self.image.ndim != 3 or self.labels_xyxy.ndim != 2 or self.labels_xyxy.shape[1] != 4
+                or self.feet.shape != (len(self.labels_xyxy), 3)):
+            raise ValueError(f"image {self.image.shape}, labels {self.labels_xyxy.shape}, "
+                             f"feet {self.feet.shape}")
 
 
 class PolarStripDataset:
@@ -205,7 +222,7 @@ class PolarStripDataset:
         self.seed = seed
         self.cache = cache
         self.epoch = 0
-        self._strips: dict[tuple[int, float], tuple[NDArray[np.uint8], FloatArray]] = {}
+        self._strips: dict[tuple[int, float], tuple[NDArray[np.uint8], FloatArray, FloatArray]] = {}
         self.full_turns_left_out = 0
 
     def set_epoch(self, epoch: int) -> None:
@@ -218,35 +235,40 @@ class PolarStripDataset:
         """Counters for the epoch's log record."""
         return {"full_turn_labels_left_out": self.full_turns_left_out}
 
-    def base(self, index: int, radius_scale: float = 1.0) -> tuple[NDArray[np.uint8], FloatArray]:
-        """The frame's full-turn strip and labels (strip px), cached when `cache`."""
+    def base(self, index: int, radius_scale: float = 1.0
+             ) -> tuple[NDArray[np.uint8], FloatArray, FloatArray]:
+        """The frame's full-turn strip, labels and feet (strip px), cached when `cache`."""
         key = (index, radius_scale)
         if key in self._strips:
             return self._strips[key]
-        strip, xyxy, full_turns = frame_strip(self.frames[index], self.info, radius_scale)
+        strip, xyxy, feet, full_turns = frame_strip(self.frames[index], self.info, radius_scale)
         if full_turns:
             log.info("%s: %d people over the principal point left out", self.frames[index].path, full_turns)
         if self.cache:
             self.full_turns_left_out += full_turns
-            self._strips[key] = (strip, xyxy)
-        return strip, xyxy
+            self._strips[key] = (strip, xyxy, feet)
+        return strip, xyxy, feet
 
     def __getitem__(self, index: int) -> StripSample:
         rng = np.random.default_rng((self.seed, self.epoch, index))
         scales = self.augment.radius_scales
         scale = scales[int(rng.integers(len(scales)))] if len(scales) > 1 else scales[0]
-        strip, xyxy = self.base(index, scale)
+        strip, first_turn, feet = self.base(index, scale)
         width = self.config.polar_width
         shift = int(rng.integers(width)) if self.augment.roll else 0
-        image, xyxy = roll_strip(strip, xyxy, shift, self.config.polar_overlap)
-        labels = place_labels(xyxy, width, self.config.strip_wh)
+        image, xyxy = roll_strip(strip, first_turn, shift, self.config.polar_overlap)
+        labels, source, moved = label_copies(xyxy, width, self.config.strip_wh)
+        feet = feet[source].copy()
+        feet[:, 0] += (xyxy[:, 0] - first_turn[:, 0])[source] + moved  # each foot moves with its box
         if rng.random() < self.augment.flip:
             image = np.ascontiguousarray(image[:, ::-1])
             right = image.shape[1] - 1
             x1, y1, x2, y2 = labels.T
             labels = np.stack([right - x2, y1, right - x1, y2], axis=1)
+            feet[:, 0] = right - feet[:, 0]
         image = photometric(image, self.augment, rng)
-        return StripSample(image, labels + EDGE_TO_CENTRE_PX)
+        edge = np.array([EDGE_TO_CENTRE_PX, EDGE_TO_CENTRE_PX, 0.0])
+        return StripSample(image, labels + EDGE_TO_CENTRE_PX, feet + edge)
 
 
 class YoloxSample(Protocol):
@@ -257,6 +279,14 @@ class YoloxSample(Protocol):
 
     @property
     def labels_xyxy(self) -> FloatArray: ...
+
+
+def collate_feet(samples: Sequence[YoloxSample]) -> list[Tensor] | None:
+    """Per-image feet (N_i, 3) float32 of samples that carry them (StripSample), else None."""
+    feet = [getattr(s, "feet", None) for s in samples]
+    if any(f is None for f in feet):
+        return None
+    return [torch.from_numpy(np.asarray(f, dtype=np.float32)) for f in feet]
 
 
 def collate_strips(samples: Sequence[YoloxSample]) -> tuple[Tensor, list[Tensor]]:

@@ -50,7 +50,7 @@ def test_rolled_strip_labels_map_back_to_the_frame_boxes(toy_dataset: Callable[.
                                                          shift: int) -> None:
     frame = read_dataset(toy_dataset(count=1, size=128, people=4))[0]
     info = training_info(CONFIG)
-    strip, xyxy, full_turns = frame_strip(frame, info)
+    strip, xyxy, _, full_turns = frame_strip(frame, info)
     assert full_turns == 0 and len(xyxy) == 4
     image, moved = roll_strip(strip, xyxy, shift, CONFIG.polar_overlap)
     assert frame.camera is not None
@@ -82,7 +82,7 @@ def test_person_below_the_lens_is_left_out(toy_dataset: Callable[..., Path]) -> 
         locations_m=np.concatenate([frame.locations_m, [[0.0, 0.0]]]),
         distances_m=np.append(frame.distances_m, 0.0),
         visible_fraction=np.append(frame.visible_fraction, 1.0), bboxes_xywh=None, areas_px=None)
-    _, xyxy, full_turns = frame_strip(frame, training_info(CONFIG))
+    _, xyxy, _, full_turns = frame_strip(frame, training_info(CONFIG))
     assert full_turns == 1 and len(xyxy) == 2
 
 
@@ -142,7 +142,7 @@ def test_distillation_is_zero_against_itself_and_the_loss_learns(
         teacher_maps = teacher(images)
     start = loss(student(images), labels, teacher_maps)
     assert abs(start["distill"].item()) < 1e-6
-    assert set(start) == {"iou", "objectness", "class", "distill", "total"}
+    assert set(start) == {"iou", "objectness", "class", "distill", "foot", "total"}
     bias = student.get_parameter("head.obj_preds.0.bias")
     with torch.no_grad():  # a different student: the term must see it
         bias.add_(4.0)
@@ -212,7 +212,7 @@ def test_cli_zero_epochs_validation_and_release(
     assert _cli(run, data, "--epochs", "1", "--batch-size", "2", "--val", str(data)) == 0
     record = json.loads((run / "log.jsonl").read_text().splitlines()[0])
     assert {"mAP", "AP50", "AP_near", "AP_mid", "AP_far", "recall"} <= set(record["val"])
-    assert set(record["train"]) == {"iou", "objectness", "class", "distill", "total"}
+    assert set(record["train"]) == {"iou", "objectness", "class", "distill", "foot", "total"}
     assert (run / "best.pt").exists() and load_checkpoint(run / "best.pt").config == CONFIG
 
 

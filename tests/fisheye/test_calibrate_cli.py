@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from fisheye import camera_from_dict, load_camera
+from fisheye import camera_from_dict, camera_to_dict, load_camera
 from fisheye.ruler_marks import marks_to_csv, simulate_ruler_marks
 from service.cli import main
 
@@ -108,7 +108,7 @@ def test_opencv_import_scales_to_the_requested_size(tmp_path: Path) -> None:
         (["--image-size", "2952", "2952", "--altitude", "0"], "altitude_m"),
         (["--altitude", "3.2"], "--image-size W H is required"),
         (["--image-size", "2952", "2952", "--altitude", "3.2", "--coefficients", "7"], "coefficients"),
-        (["--image-size", "100", "100", "--altitude", "3.2"], "principal_point"),
+        (["--image-size", "100", "100", "--altitude", "3.2"], "lies outside the 100x100 image"),
         (["--image-size", "2952", "2952", "--altitude", "3.2", "--id", "no spaces"], "id"),
     ],
 )
@@ -165,3 +165,37 @@ def test_command_line_end_to_end(marks_csv: Path, tmp_path: Path) -> None:
         cwd=REPO, capture_output=True, text=True, check=False, timeout=120,
     )
     assert help_text.returncode == 0 and "--marks" in help_text.stdout and "--opencv" in help_text.stdout
+
+
+@pytest.mark.parametrize(("distances", "warned"), [(np.arange(0.25, 10.001, 0.25), False),
+                                                   (np.arange(0.25, 2.001, 0.25), True)])
+def test_fit_tilt_prints_the_tilt_and_warns_when_it_is_not_pinned_down(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], distances: np.ndarray, warned: bool) -> None:
+    tilted = camera_from_dict(TRUE.model_dump(mode="json", exclude_none=True) | {"tilt_deg": [2.0, -1.5]})
+    marks = simulate_ruler_marks(tilted, [0.0, 90.0, 180.0, 270.0], distances, noise_px=0.5, seed=4)
+    csv = tmp_path / "marks.csv"
+    csv.write_text(marks_to_csv(marks), encoding="utf-8")
+    output = tmp_path / "tilted.json"
+    assert main(["calibrate", "--marks", str(csv), "--altitude", "3.2", "--image-size", "2952", "2952",
+                 "-o", str(output), "--fit-tilt"]) == 0
+    out = capsys.readouterr().out
+    assert "principal point from the nadir mark, then fitted with the tilt" in out
+    assert ", tilt [" in out
+    assert ("warning: tilt fitted" in out) == warned and ("note: tilt fitted" in out) != warned
+    assert load_camera(output).tilt_deg is not None
+
+
+def test_check_altitude_reports_the_fitted_beside_the_configured(marks_csv: Path, tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    wrong = tmp_path / "wrong.yaml"
+    wrong.write_text(json.dumps({**camera_to_dict(TRUE), "altitude_m": 3.0}), encoding="utf-8")
+    before = wrong.read_text(encoding="utf-8")
+    assert main(["calibrate", "--check-altitude", str(wrong), "--marks", str(marks_csv)]) == 0
+    out = capsys.readouterr().out
+    fitted = float(out.split("fitted ")[1].split(" m")[0])
+    assert "configured 3.000 m" in out and fitted == pytest.approx(3.2, abs=0.01)
+    assert wrong.read_text(encoding="utf-8") == before  # nothing written
+    assert main(["calibrate", "--check-altitude", str(wrong), "--opencv", str(marks_csv)]) == 2
+    assert "needs --marks" in capsys.readouterr().err
+    assert main(["calibrate", "--marks", str(marks_csv), "--image-size", "2952", "2952"]) == 2
+    assert "--altitude and -o/--output are required" in capsys.readouterr().err

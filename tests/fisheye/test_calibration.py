@@ -115,7 +115,7 @@ def test_principal_point_fitted_without_a_nadir_mark() -> None:
                           tuple(np.asarray(marks.ruler)[away]))
     fit = _fit(no_nadir, fit_principal_point=True)
     np.testing.assert_allclose(fit.camera.principal_point, TRUE.principal_point, atol=1e-6)
-    assert "image centre" in fit.notes[0]
+    assert "image centre" in fit.notes[0].message
 
 
 def test_monotonicity_constraint_keeps_the_lens_valid() -> None:
@@ -126,7 +126,7 @@ def test_monotonicity_constraint_keeps_the_lens_valid() -> None:
     marks = simulate_ruler_marks(truth, FOUR_RULERS, np.arange(0.5, 12.001, 0.5))
     fit = _fit(marks, coefficients=2, max_theta_deg=89)
     assert fit.monotonic_constrained
-    assert any("strictly increasing" in note for note in fit.notes)
+    assert any("strictly increasing" in note.message for note in fit.notes)
     assert monotonic_violation(fit.camera.kb, math.radians(89)) is None
     unconstrained = -1 / (3 * fit.camera.kb[1])  # θ² where 1 + 3·k2·θ² would reach 0 for k1 = 1
     assert fit.camera.kb[1] < 0 and math.sqrt(unconstrained) <= math.radians(89) + 1e-3
@@ -160,8 +160,8 @@ def test_position_residuals_with_floor_coordinates() -> None:
 def test_notes_say_how_far_the_marks_reach() -> None:
     fit = _fit(simulate_ruler_marks(TRUE, FOUR_RULERS, EVERY_HALF_METRE))
     assert fit.theta_max_marked_deg == pytest.approx(math.degrees(math.atan(10 / 3.2)))
-    assert "nadir mark" in fit.notes[0]
-    assert "10.00 m" in fit.notes[1] and "extrapolated" in fit.notes[1]
+    assert "nadir mark" in fit.notes[0].message
+    assert "10.00 m" in fit.notes[1].message and "extrapolated" in fit.notes[1].message
 
 
 def _marks_on_one_line() -> RulerMarks:

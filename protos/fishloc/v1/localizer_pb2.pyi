@@ -141,7 +141,7 @@ class SitePose(_message.Message):
     def __init__(self, x_m: _Optional[float] = ..., y_m: _Optional[float] = ..., yaw_deg: _Optional[float] = ...) -> None: ...
 
 class Camera(_message.Message):
-    __slots__ = ("id", "altitude_m", "image_size", "principal_point", "focal_px", "kb", "max_theta_deg", "site_pose", "site")
+    __slots__ = ("id", "altitude_m", "image_size", "principal_point", "focal_px", "kb", "max_theta_deg", "site_pose", "site", "tilt_deg", "masks_px")
     ID_FIELD_NUMBER: _ClassVar[int]
     ALTITUDE_M_FIELD_NUMBER: _ClassVar[int]
     IMAGE_SIZE_FIELD_NUMBER: _ClassVar[int]
@@ -151,6 +151,8 @@ class Camera(_message.Message):
     MAX_THETA_DEG_FIELD_NUMBER: _ClassVar[int]
     SITE_POSE_FIELD_NUMBER: _ClassVar[int]
     SITE_FIELD_NUMBER: _ClassVar[int]
+    TILT_DEG_FIELD_NUMBER: _ClassVar[int]
+    MASKS_PX_FIELD_NUMBER: _ClassVar[int]
     id: str
     altitude_m: float
     image_size: ImageSize
@@ -160,7 +162,15 @@ class Camera(_message.Message):
     max_theta_deg: float
     site_pose: SitePose
     site: str
-    def __init__(self, id: _Optional[str] = ..., altitude_m: _Optional[float] = ..., image_size: _Optional[_Union[ImageSize, _Mapping]] = ..., principal_point: _Optional[_Union[Point, _Mapping]] = ..., focal_px: _Optional[_Union[Point, _Mapping]] = ..., kb: _Optional[_Iterable[float]] = ..., max_theta_deg: _Optional[float] = ..., site_pose: _Optional[_Union[SitePose, _Mapping]] = ..., site: _Optional[str] = ...) -> None: ...
+    tilt_deg: Point
+    masks_px: _containers.RepeatedCompositeFieldContainer[Polygon]
+    def __init__(self, id: _Optional[str] = ..., altitude_m: _Optional[float] = ..., image_size: _Optional[_Union[ImageSize, _Mapping]] = ..., principal_point: _Optional[_Union[Point, _Mapping]] = ..., focal_px: _Optional[_Union[Point, _Mapping]] = ..., kb: _Optional[_Iterable[float]] = ..., max_theta_deg: _Optional[float] = ..., site_pose: _Optional[_Union[SitePose, _Mapping]] = ..., site: _Optional[str] = ..., tilt_deg: _Optional[_Union[Point, _Mapping]] = ..., masks_px: _Optional[_Iterable[_Union[Polygon, _Mapping]]] = ...) -> None: ...
+
+class Polygon(_message.Message):
+    __slots__ = ("points",)
+    POINTS_FIELD_NUMBER: _ClassVar[int]
+    points: _containers.RepeatedCompositeFieldContainer[Point]
+    def __init__(self, points: _Optional[_Iterable[_Union[Point, _Mapping]]] = ...) -> None: ...
 
 class ListCamerasRequest(_message.Message):
     __slots__ = ()

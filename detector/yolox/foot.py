@@ -1,0 +1,101 @@
+"""Where the feet touch the floor: a foot branch on the YOLOX box branch (polar view).
+
+The box-side foot point (the middle of a box's side nearest the principal point) is the edge of the
+visible silhouette, not the feet: shoulders, a leaning torso, a chair. Each cell of a network with
+`YoloxConfig.foot` also predicts the contact point as two offsets from its own box, in box sizes:
+
+    foot_x = cx + a · w,    foot_y = y2 + b · h        (strip px, xyxy box, y2 the bottom side)
+
+In the polar strip the bottom side is the one nearest the principal point (radius grows upwards),
+so `a = b = 0` is exactly the box-side foot point; the branch's last convolution starts at zero, so
+an untrained branch answers what the box side answers.
+
+Training targets come from the renders' `location_m`, projected into the frame by the camera and
+into the strip by the polar grid (`strip_feet`). The loss is L1 in strip pixels times the metres
+one strip row spans at the target (`metres_per_px`), so far people, with few pixels per metre,
+count in metres, not pixels.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+from torch import Tensor, nn
+
+from detector.yolox.blocks import conv_block
+from fisheye import FisheyeCamera
+from fisheye.polar import PolarGrid
+
+FloatArray = NDArray[np.float64]
+FOOT_CHANNELS = 2  # a, b of the module docstring
+
+
+class FootHead(nn.Module):
+    """Box-branch features of the 3 levels (B, width, h_i, w_i) -> offsets (B, 2, h_i, w_i)."""
+
+    def __init__(self, width: int, levels: int, depthwise: bool) -> None:
+        super().__init__()
+        self.convs = nn.ModuleList([conv_block(width, width, 3, 1, depthwise) for _ in range(levels)])
+        self.preds = nn.ModuleList([nn.Conv2d(width, FOOT_CHANNELS, 1) for _ in range(levels)])
+        for pred in self.preds:
+            assert isinstance(pred, nn.Conv2d) and pred.bias is not None
+            nn.init.zeros_(pred.weight)
+            nn.init.zeros_(pred.bias)
+
+    def forward(self, reg_features: Sequence[Tensor]) -> list[Tensor]:
+        return [pred(conv(x)) for x, conv, pred in zip(reg_features, self.convs, self.preds, strict=True)]
+
+
+def foot_from_offsets(offsets: Tensor, cxcywh: Tensor) -> Tensor:
+    """(..., 2) offsets a, b and (..., 4) `cxcywh` boxes -> (..., 2) foot points, same px."""
+    centre_x, _, width, height = cxcywh.unbind(-1)
+    bottom = cxcywh[..., 1] + height / 2
+    return torch.stack([centre_x + offsets[..., 0] * width, bottom + offsets[..., 1] * height], dim=-1)
+
+
+def foot_loss(offsets: Tensor, boxes_xyxy: Tensor, targets: Tensor) -> tuple[Tensor, int]:
+    """Sum over positives of metres-weighted L1 and their count.
+
+    offsets (P, 2) predicted a, b; boxes_xyxy (P, 4) the cells' decoded boxes (the foot is read off
+    the box the model itself predicts, as at inference); targets (P, 3) foot x, y (px) and metres
+    per px, NaN where the person's floor point is unknown."""
+    valid = torch.isfinite(targets).all(dim=1)
+    if not bool(valid.any()):
+        return offsets.new_zeros(()), 0
+    boxes = boxes_xyxy[valid].detach()
+    cxcywh = torch.cat([(boxes[:, :2] + boxes[:, 2:]) / 2, boxes[:, 2:] - boxes[:, :2]], dim=1)
+    predicted = foot_from_offsets(offsets[valid], cxcywh)  # (V, 2) px
+    error = (predicted - targets[valid, :2]).abs().sum(dim=1)  # (V,) px
+    return (error * targets[valid, 2]).sum(), int(valid.sum())
+
+
+def metres_per_px(grid: PolarGrid, camera: FisheyeCamera, strip_xy: FloatArray) -> FloatArray:
+    """(N,) floor metres between each strip point (N, 2) and the point one row nearer the centre:
+    how much a pixel of radial error costs there (NaN where either has no floor point)."""
+    if len(strip_xy) == 0:
+        return np.zeros(0)
+    here = camera.pixels_to_floor(grid.strip_to_frame(strip_xy))
+    inward = camera.pixels_to_floor(grid.strip_to_frame(strip_xy + np.array([0.0, 1.0])))
+    return np.asarray(np.linalg.norm(here - inward, axis=1), dtype=np.float64)
+
+
+def strip_feet(grid: PolarGrid, camera: FisheyeCamera, locations_m: FloatArray, boxes_xyxy: FloatArray
+               ) -> FloatArray:
+    """Floor points (N, 2) m of the people of strip boxes (N, 4) -> (N, 3) targets: the foot in
+    strip px (in the same turn as its box's centre) and `metres_per_px` there; NaN rows where the
+    floor point is unknown or has no pixel."""
+    if len(locations_m) == 0:
+        return np.zeros((0, 3))
+    feet = np.full((len(locations_m), 3), np.nan)
+    known = np.all(np.isfinite(locations_m), axis=1)
+    if not known.any():
+        return feet
+    strip = grid.frame_to_strip(camera.floor_to_pixels(locations_m[known]))  # (K, 2), first turn
+    centre_x = (boxes_xyxy[known, 0] + boxes_xyxy[known, 2]) / 2
+    strip[:, 0] += np.round((centre_x - strip[:, 0]) / grid.width) * grid.width
+    feet[known, :2] = strip
+    feet[known, 2] = metres_per_px(grid, camera, strip)
+    return np.where(np.all(np.isfinite(feet), axis=1, keepdims=True), feet, np.nan)

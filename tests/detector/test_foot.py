@@ -1,0 +1,186 @@
+"""The foot output: targets from `location_m`, the branch, its loss and training, export, the CLI."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from contract import OnnxModel, SessionThreads
+from contract.views import polar_grid
+from detector.checkpoint import Checkpoint, ModelInfo, load_checkpoint, save_checkpoint
+from detector.data.readers import read_dataset
+from detector.metrics import EvalFrame, compute_metrics
+from detector.yolox.finetune import FinetuneConfig, Finetuner
+from detector.yolox.foot import foot_from_offsets, foot_loss, strip_feet
+from detector.yolox.network import YoloxNano
+from detector.yolox.polar import PolarContract, PolarDetectorConfig, init_from_pretrained
+from detector.yolox.strips import PolarStripDataset, StripAugment, collate_feet, frame_strip, training_info
+from exporter.export import export_onnx
+from exporter.parity import synthetic_parity_frames
+from fisheye import foot_points
+from models import ASSETS_DIR
+from service.cli import main
+
+ONNX_PATH = ASSETS_DIR / "pretrained" / "yolox_nano.onnx"
+CONFIG = PolarDetectorConfig(input_size=64, polar_width=256, polar_overlap=32, foot=True)
+FROZEN = ("stem", "dark2", "dark3", "dark4", "dark5", "neck", "head")
+
+
+@pytest.fixture(scope="module")
+def footed() -> YoloxNano:
+    return init_from_pretrained(str(ONNX_PATH), CONFIG)
+
+
+def test_an_untrained_branch_answers_the_box_side_and_leaves_the_boxes(footed: YoloxNano) -> None:
+    plain = init_from_pretrained(str(ONNX_PATH), dataclasses.replace(CONFIG, foot=False))
+    strips = torch.from_numpy(synthetic_parity_frames(64, count=2, width=288))
+    with torch.no_grad():
+        boxes, scores, foot = PolarContract(footed, 50)(strips)
+        plain_boxes, plain_scores = PolarContract(plain, 50)(strips)
+    torch.testing.assert_close(boxes, plain_boxes)
+    torch.testing.assert_close(scores, plain_scores)
+    # The bottom side of a strip box is the side nearest the principal point.
+    bottom_middle = torch.stack([(boxes[..., 0] + boxes[..., 2]) / 2, boxes[..., 3]], dim=-1)
+    torch.testing.assert_close(foot, bottom_middle, atol=1e-4, rtol=0)
+
+
+def test_foot_targets_lead_back_to_the_floor_points(toy_dataset: Callable[..., Path]) -> None:
+    frame = read_dataset(toy_dataset(count=1, size=128, people=4))[0]
+    assert frame.camera is not None
+    info = training_info(CONFIG)
+    _, xyxy, feet, _ = frame_strip(frame, info)
+    turn = dataclasses.replace(info, polar=dataclasses.replace(info.polar, overlap=0))
+    grid = polar_grid(turn, frame.camera)
+    assert feet.shape == (len(xyxy), 3) and np.all(feet[:, 2] > 0)
+    back = frame.camera.pixels_to_floor(grid.strip_to_frame(feet[:, :2]))
+    np.testing.assert_allclose(back, frame.locations_m[:len(xyxy)], atol=1e-6)
+    # each foot lies in the turn of its box, below its middle (nearer the centre than the head)
+    centre_x = (xyxy[:, 0] + xyxy[:, 2]) / 2
+    assert np.all(np.abs(feet[:, 0] - centre_x) < grid.width / 4)
+    unknown = strip_feet(grid, frame.camera, np.full((1, 2), np.nan), xyxy[:1])
+    assert np.all(np.isnan(unknown))
+
+
+def test_rolled_and_flipped_samples_keep_each_foot_with_its_box(toy_dataset: Callable[..., Path]) -> None:
+    frames = read_dataset(toy_dataset(count=2, size=128, people=4))
+    dataset = PolarStripDataset(frames, CONFIG, StripAugment(flip=1.0, brightness=0.0, contrast=0.0,
+                                                              saturation=0.0, hue_deg=0.0), seed=3)
+    plain = PolarStripDataset(frames, CONFIG, StripAugment.none(), seed=3)
+    def relative(sample_feet: np.ndarray, labels: np.ndarray, mirror: float) -> set[tuple[float, float]]:
+        """Each foot's offset from its box's bottom middle, rounded (seam copies repeat a label),
+        of the boxes that the strip's ends do not clip."""
+        inside = (labels[:, 0] > 1.0) & (labels[:, 2] < CONFIG.strip_wh[0] - 1.0)
+        sample_feet, labels = sample_feet[inside], labels[inside]
+        bottom_middle = np.stack([(labels[:, 0] + labels[:, 2]) / 2, labels[:, 3]], axis=1)
+        offset = (sample_feet[:, :2] - bottom_middle) * np.array([mirror, 1.0])
+        return {(round(float(x), 6), round(float(y), 6)) for x, y in offset}
+
+    for index in range(2):
+        sample, reference = dataset[index], plain[index]
+        assert sample.feet.shape == (len(sample.labels_xyxy), 3)
+        # rolling moves a foot with its box; flipping mirrors its offset from the box's middle
+        assert relative(sample.feet, sample.labels_xyxy, -1.0) == relative(reference.feet,
+                                                                          reference.labels_xyxy, 1.0)
+        assert np.all(np.abs(sample.feet[:, 0] - (sample.labels_xyxy[:, 0] + sample.labels_xyxy[:, 2]) / 2)
+                      <= sample.labels_xyxy[:, 2] - sample.labels_xyxy[:, 0])
+    feet = collate_feet([dataset[0], dataset[1]])
+    assert feet is not None and feet[0].shape == (len(dataset[0].labels_xyxy), 3)
+
+
+@pytest.mark.parametrize(("offsets", "expected"), [
+    ([[0.0, 0.0]], 0.0 + 2.0 * 0.5),  # box side: 2 px short of the target at 0.5 m/px
+    ([[0.0, 0.2]], 0.0),  # 0.2 of the 10 px height below the bottom side: on target
+    ([[0.1, 0.2]], 0.4 * 0.5),  # 0.4 px to the side
+])
+def test_foot_loss_counts_metres(offsets: list[list[float]], expected: float) -> None:
+    box = torch.tensor([[10.0, 0.0, 14.0, 10.0]])  # xyxy, bottom side at y = 10
+    target = torch.tensor([[12.0, 12.0, 0.5]])  # foot x, y px, metres per px
+    total, count = foot_loss(torch.tensor(offsets), box, target)
+    assert count == 1 and total.item() == pytest.approx(expected, abs=1e-6)
+    assert foot_loss(torch.tensor(offsets), box, torch.full((1, 3), float("nan")))[1] == 0
+    torch.testing.assert_close(foot_from_offsets(torch.zeros(1, 2), torch.tensor([[12.0, 5.0, 4.0, 10.0]])),
+                               torch.tensor([[12.0, 10.0]]))
+
+
+def test_training_the_branch_alone_moves_the_feet_not_the_boxes(
+        footed: YoloxNano, toy_dataset: Callable[..., Path], tmp_path: Path) -> None:
+    frames = read_dataset(toy_dataset(count=4, size=128, people=3))
+    config = FinetuneConfig(epochs=3, batch_size=2, lr=1e-2, warmup_steps=1, seed=1, device="cpu",
+                            freeze=FROZEN, distill=0.0, augment=StripAugment.none())
+    tuner = Finetuner(CONFIG, config, tmp_path / "run", footed, frames, None, "toy", progress=False)
+    first = tuner.train_step([0, 1])
+    tuner.fit()
+    trained = tuner.model.state_dict()
+    for key, value in footed.state_dict().items():
+        if not key.startswith("foot."):
+            assert torch.equal(trained[key], value), key
+    branch = {k: v for k, v in footed.state_dict().items() if k.startswith("foot.")}
+    assert any(not torch.equal(trained[k], v) for k, v in branch.items())
+    last = tuner.train_step([0, 1])
+    assert first["foot"] > 0 and last["foot"] < first["foot"]
+
+
+def test_export_carries_the_foot_and_matches_torch(footed: YoloxNano, tmp_path: Path) -> None:
+    network = copy.deepcopy(footed)
+    with torch.no_grad():  # a branch that answers something else than the box side
+        for pred in network.foot.preds:  # type: ignore[union-attr]
+            pred.bias.copy_(torch.tensor([0.1, -0.2]))  # type: ignore[union-attr]
+    checkpoint = Checkpoint(CONFIG, network.state_dict(), ModelInfo("foot-test", "toy", 0.3), {})
+    path = tmp_path / "foot.onnx"
+    export_onnx(checkpoint, path)  # runs the parity check, foot included
+    model = OnnxModel(path, SessionThreads(1))
+    assert model.has_foot
+    strips = synthetic_parity_frames(64, count=1, width=288)
+    raw = model.run(strips[0])
+    assert raw.foot is not None
+    boxes, foot = raw.boxes.astype(np.float64), raw.foot.astype(np.float64)
+    width, height = boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]
+    centre_x = (boxes[:, 0] + boxes[:, 2]) / 2
+    np.testing.assert_allclose(foot[:, 0], centre_x + 0.1 * width, atol=1e-3)
+    np.testing.assert_allclose(foot[:, 1], boxes[:, 3] - 0.2 * height, atol=1e-3)
+
+
+def test_cli_adds_the_foot_to_a_polar_checkpoint(
+        footed: YoloxNano, toy_dataset: Callable[..., Path], tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    plain = dataclasses.replace(CONFIG, foot=False)
+    start = tmp_path / "start.pt"
+    network = init_from_pretrained(str(ONNX_PATH), plain)
+    save_checkpoint(start, Checkpoint(plain, network.state_dict(), ModelInfo("s", "toy", 0.4), {}))
+    data = toy_dataset(count=2, size=128, people=2)
+    out = tmp_path / "foot"
+    args = ["train", "--init-from", str(start), "--foot", "--data", str(data), "--out", str(out), "--quiet",
+            "--threads", "1", "--epochs", "1", "--batch-size", "2", "--distill", "0", "--freeze", *FROZEN]
+    assert main(args) == 0
+    trained = load_checkpoint(out / "last.pt")
+    assert trained.config == CONFIG
+    for key, value in network.state_dict().items():
+        assert torch.equal(trained.model_state[key], value), key
+    assert main([*args[:1], "--init-from", str(start), "--strip", "64", "256", "32", *args[4:]]) == 2
+    assert "fixes the view and strip" in capsys.readouterr().err
+
+
+def test_metrics_place_people_by_the_predicted_foot() -> None:
+    from fisheye import camera_from_dict
+
+    camera = camera_from_dict({"id": "m", "altitude_m": 3.0, "image_size": [401, 401],
+                               "principal_point": [200.0, 200.0], "focal_px": [120.0, 120.0], "kb": [1.0]})
+    truth = np.array([[2.0, 0.0]])
+    foot_px = camera.floor_to_pixels(truth)
+    box = np.array([[foot_px[0, 0] + 20.0, foot_px[0, 1], 14.0, 30.0]])  # its near side 5 px beyond the feet
+    frame = EvalFrame(gt_boxes=box, gt_locations_m=truth, gt_distances_m=np.array([2.0]), det_boxes=box,
+                      det_scores=np.array([0.9]), principal_point=camera.principal_point, camera=camera,
+                      det_foot_px=foot_px)
+    metrics = compute_metrics([frame], 0.5)
+    box_side = camera.pixels_to_floor(foot_points(box, camera.principal_point))
+    assert metrics["mPE"] == pytest.approx(0.0, abs=1e-9)
+    assert metrics["mPE_box_side"] == pytest.approx(float(np.linalg.norm(box_side - truth)))
+    assert metrics["mPE_box_side"] > 0.1 and metrics["mPE_center"] > metrics["mPE_box_side"]
+    without = compute_metrics([dataclasses.replace(frame, det_foot_px=None)], 0.5)
+    assert without["mPE"] == without["mPE_box_side"]
