@@ -7,7 +7,6 @@ import logging
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
-from pydantic import ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from service.frame_decode import FrameError
@@ -51,8 +50,7 @@ def frame_error(error: FrameError) -> ApiError:
     return ApiError(FRAME_ERROR_STATUS.get(error.code, 400), error.code, error.message)
 
 
-def describe_validation(error: RequestValidationError | ValidationError) -> str:
-    """One line naming every invalid field of a request or body and what is wrong with it."""
+def _validation_message(error: RequestValidationError) -> str:
     parts = []
     for item in error.errors():
         location = ".".join(str(p) for p in item.get("loc", ()) if p != "body") or "request"
@@ -74,7 +72,7 @@ def install_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(RequestValidationError)
     async def _validation_error(_request: Request, error: RequestValidationError) -> JSONResponse:
-        return error_response(422, "invalid_request", describe_validation(error))
+        return error_response(422, "invalid_request", _validation_message(error))
 
     @app.exception_handler(Exception)
     async def _crash(_request: Request, error: Exception) -> JSONResponse:

@@ -11,11 +11,12 @@ from starlette.concurrency import run_in_threadpool
 
 from fisheye import FisheyeCamera, camera_to_dict, fit_site_pose
 from fisheye.camera import CAMERA_ID_PATTERN
+from fisheye.camera_file import describe_validation_error
 from service.dependencies import State, require_write_token
-from service.errors import ApiError, describe_validation
+from service.errors import ApiError
 from service.request_body import BodyLimits, read_json_object
 from service.routes.cameras import not_found
-from service.schemas import error_responses
+from service.schemas import error_responses, inline_schema
 
 router = APIRouter(tags=["cameras"])
 
@@ -41,25 +42,8 @@ class PoseFitRequest(BaseModel):
                                           "token like a camera write)")
 
 
-def _inlined(schema: dict[str, Any]) -> dict[str, Any]:
-    """A JSON schema with its `$defs` references written out (the OpenAPI document has no `$defs`)."""
-    defs = schema.pop("$defs", {})
-
-    def expand(node: Any) -> Any:
-        if isinstance(node, dict):
-            if "$ref" in node:
-                return expand(defs[node["$ref"].rsplit("/", 1)[-1]])
-            return {key: expand(value) for key, value in node.items()}
-        if isinstance(node, list):
-            return [expand(item) for item in node]
-        return node
-
-    expanded: dict[str, Any] = expand(schema)
-    return expanded
-
-
 _REQUEST_BODY = {"required": True, "content": {"application/json": {
-    "schema": _inlined(PoseFitRequest.model_json_schema())}}}
+    "schema": inline_schema(PoseFitRequest)}}}
 _MAX_BODY_BYTES = 64 * 1024
 
 
@@ -103,7 +87,7 @@ async def fit_pose(request: Request, state: State,
     try:
         body = PoseFitRequest.model_validate(record)
     except ValidationError as error:
-        raise ApiError(422, "invalid_request", describe_validation(error)) from None
+        raise ApiError(422, "invalid_request", describe_validation_error(error, "request")) from None
     if body.save:
         require_write_token(request, state)
     camera = await run_in_threadpool(state.registry.get, camera_id)
