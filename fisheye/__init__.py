@@ -27,7 +27,7 @@ from fisheye.camera_file import (
 from fisheye.letterbox import Letterbox
 from fisheye.rotated import polygon_iou, rotated_iou, rotated_nms
 from fisheye.ruler_marks import RulerMarks, read_marks_csv, simulate_ruler_marks
-from fisheye.site import SitePose
+from fisheye.site import SitePose, SitePoseFit, fit_site_pose
 
 __all__ = [
     "CalibrationError",
@@ -39,6 +39,7 @@ __all__ = [
     "RulerFitConfig",
     "RulerMarks",
     "SitePose",
+    "SitePoseFit",
     "assumed_camera",
     "camera_from_dict",
     "camera_from_opencv",
@@ -46,6 +47,7 @@ __all__ = [
     "cepdof_to_radius_aligned",
     "cxcywh_to_corners",
     "fit_ruler_calibration",
+    "fit_site_pose",
     "foot_points",
     "load_camera",
     "load_cameras",

@@ -68,6 +68,8 @@ class FisheyeCamera(BaseModel):
                                   "absent or [0, 0] is a level camera.")
     masks_px: Polygons | None = Field(
         default=None, description="Polygons [[u, v], ...] at image_size where nobody is counted.")
+    site: str | None = Field(default=None, pattern=CAMERA_ID_PATTERN,
+                             description="The site (floor plan) the camera belongs to.")
     site_pose: SitePose | None = None
 
     @field_validator("id")
@@ -259,8 +261,10 @@ class FisheyeCamera(BaseModel):
         return self.world_to_pixels(np.concatenate([points, np.zeros((len(points), 1))], axis=1))
 
     def floor_to_site(self, xy_m: ArrayLike) -> FloatArray | None:
-        """(N, 2) floor-frame m -> (N, 2) site-frame m, or None when the camera has no site pose."""
-        return None if self.site_pose is None else self.site_pose.floor_to_site(xy_m)
+        """(N, 2) floor-frame m -> (N, 2) site-frame m, or None when the camera has no site pose (a
+        camera of a site without one stands at the site's origin, unturned)."""
+        pose = self.site_pose or (SitePose() if self.site is not None else None)
+        return None if pose is None else pose.floor_to_site(xy_m)
 
     def masked(self, uv_px: ArrayLike) -> NDArray[np.bool_]:
         """(N, 2) px -> (N,) whether each pixel lies inside one of the camera's mask polygons."""

@@ -13,7 +13,19 @@ from fastapi.middleware.cors import CORSMiddleware
 from service.dependencies import ServiceState
 from service.errors import install_error_handlers
 from service.middleware import RequestContextMiddleware
-from service.routes import calibrations, cameras, detect, docs, health, latest, metrics, model, viewer
+from service.routes import (
+    calibrations,
+    cameras,
+    detect,
+    docs,
+    health,
+    latest,
+    metrics,
+    model,
+    site_poses,
+    sites,
+    viewer,
+)
 
 log = logging.getLogger(__name__)
 
@@ -40,7 +52,8 @@ def create_app(state: ServiceState, warm_up: bool = True) -> FastAPI:
     )
     app.state.fishloc = state
     install_error_handlers(app)
-    for module in (health, model, cameras, calibrations, detect, latest, metrics, viewer, docs):
+    for module in (health, model, cameras, calibrations, detect, latest, sites, site_poses, metrics, viewer,
+                   docs):
         app.include_router(module.router)
     if state.settings.cors_origins:  # CORS stays off (no CORS headers at all) unless configured
         app.add_middleware(

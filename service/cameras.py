@@ -47,6 +47,19 @@ cameras_table = Table(
     Column("record", Text, nullable=False),
     Column("revision", Integer, nullable=False),
 )
+# Zones and counting lines of sites (`sites.layout`), one JSON record each; service.site_store reads them.
+site_zones_table = Table(
+    "site_zones", _metadata,
+    Column("site", String(64), primary_key=True),
+    Column("id", String(64), primary_key=True),
+    Column("record", Text, nullable=False),
+)
+site_lines_table = Table(
+    "site_lines", _metadata,
+    Column("site", String(64), primary_key=True),
+    Column("id", String(64), primary_key=True),
+    Column("record", Text, nullable=False),
+)
 # One-off facts about the database, e.g. that the demo camera was seeded once (so deleting it sticks).
 registry_meta = Table(
     "registry_meta", _metadata,

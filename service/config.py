@@ -42,6 +42,10 @@ class Settings(BaseSettings):
     demo_camera: bool = Field(True, description="add the `demo` camera the first time a database is used")
     demo_camera_path: Path = DEMO_CAMERA_PATH
     api_token: SecretStr | None = Field(None, description="bearer token required for registry writes")
+    read_token: SecretStr | None = Field(
+        None, description="bearer token required for site reads, site events and latest frames (the API "
+                          "token also passes); none: open"
+    )
     detect_token: SecretStr | None = Field(
         None, description="bearer token required for detection (the API token also passes); none: open"
     )
@@ -79,7 +83,7 @@ class Settings(BaseSettings):
             raise ValueError("tls_cert and tls_key go together: set both (FISHLOC_TLS_CERT, FISHLOC_TLS_KEY)")
         return self
 
-    @field_validator("api_token", "detect_token")
+    @field_validator("api_token", "detect_token", "read_token")
     @classmethod
     def _empty_token_is_none(cls, value: SecretStr | None) -> SecretStr | None:
         return None if value is None or not value.get_secret_value() else value

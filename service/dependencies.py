@@ -14,6 +14,8 @@ from service.config import Settings
 from service.errors import ApiError
 from service.metrics import ServiceMetrics
 from service.runner import InferenceRunner
+from service.site_hub import SiteHub
+from service.site_store import SiteStore
 
 
 @dataclass
@@ -24,6 +26,8 @@ class ServiceState:
     runner: InferenceRunner
     registry: CameraRegistry
     metrics: ServiceMetrics
+    site_store: SiteStore
+    sites: SiteHub
 
 
 def get_state(request: Request) -> ServiceState:
@@ -70,5 +74,30 @@ def require_detect_token(request: Request, state: State) -> None:
                        headers={"WWW-Authenticate": "Bearer"})
 
 
+def read_token_passes(state: ServiceState, authorization: str) -> bool:
+    """Whether a request may read sites, their events and latest frames: no read token is configured,
+    or `authorization` is `Bearer <read token or API token>`."""
+    settings = state.settings
+    if settings.read_token is None:
+        return True
+    tokens = [settings.read_token] + ([settings.api_token] if settings.api_token is not None else [])
+    return bearer_matches(authorization, tokens)
+
+
+def require_read_token(request: Request, state: State) -> None:
+    """Site reads, events and latest frames show where people are: with FISHLOC_READ_TOKEN set they
+    need it (or the API token) as a bearer token, or as the query parameter `access_token` (a
+    browser's EventSource cannot send headers)."""
+    authorization = request.headers.get("authorization", "")
+    query_token = request.query_params.get("access_token")
+    if not authorization and query_token:
+        authorization = f"Bearer {query_token}"
+    if not read_token_passes(state, authorization):
+        raise ApiError(401, "unauthorized",
+                       "site reads and latest frames need 'Authorization: Bearer <token>'",
+                       headers={"WWW-Authenticate": "Bearer"})
+
+
 WriteAccess = Depends(require_write_token)
+ReadAccess = Depends(require_read_token)
 DetectAccess = Depends(require_detect_token)

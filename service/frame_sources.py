@@ -6,8 +6,8 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Iterator
-from dataclasses import dataclass
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +26,7 @@ class SourceFrame:
     frame_id: str
     capture_time_ns: int
     jpeg: bytes
+    camera_id: str | None = None  # set by InterleavedSource; None: the gateway's one camera
 
 
 def encode_jpeg(bgr: NDArray[Any]) -> bytes:
@@ -154,7 +155,39 @@ class CaptureSource:
             self.capture.release()
 
 
-FrameSource = FolderSource | CaptureSource
+class InterleavedSource:
+    """Several cameras' sources as one stream: a frame of each camera in turn (cameras of one site
+    that capture in step stay in step), each tagged with its camera id; it ends when all have."""
+
+    def __init__(self, sources: Mapping[str, FrameSource]) -> None:
+        if not sources:
+            raise ValueError("an interleaved source needs at least one camera")
+        self.sources = dict(sources)
+        rates: list[float | None] = [source.native_fps for source in self.sources.values()]
+        # Paced as one stream: each camera at its own rate means all of them n times as often.
+        known = [rate for rate in rates if rate is not None]
+        self.native_fps: float | None = min(known) * len(rates) if len(known) == len(rates) else None
+
+    def frames(self) -> Iterator[SourceFrame]:
+        streams = {camera_id: iter(source.frames()) for camera_id, source in self.sources.items()}
+        while streams:
+            for camera_id in list(streams):
+                frame = next(streams[camera_id], None)
+                if frame is None:
+                    del streams[camera_id]
+                    continue
+                yield replace(frame, camera_id=camera_id)
+
+    def stop(self) -> None:
+        for source in self.sources.values():
+            source.stop()
+
+    def close(self) -> None:
+        for source in self.sources.values():
+            source.close()
+
+
+FrameSource = FolderSource | CaptureSource | InterleavedSource
 
 
 def open_source(source: str, reopen: ReopenPolicy | None = None) -> FrameSource:

@@ -1,5 +1,8 @@
 """The reference camera gateway: streams a source's frames to StreamDetect and writes the answers.
 
+An `InterleavedSource` puts several cameras (e.g. the cameras of one site) on the one stream, each
+frame with its camera id and capture time.
+
 One stream per gateway; frames go out as they come (paced to `fps` when asked), answers come back
 as JSON lines (the REST answer's shape plus `status`). When the connection fails, the gateway
 reconnects with exponential backoff and goes on with the next frame; frames sent but never
@@ -94,8 +97,8 @@ class Gateway:
         self._carry: SourceFrame | None = None  # read but not sent when a stream broke
 
     def _request(self, frame: SourceFrame) -> pb.DetectRequest:
-        request = pb.DetectRequest(camera_id=self.config.camera_id, frame_id=frame.frame_id,
-                                   image=frame.jpeg)
+        request = pb.DetectRequest(camera_id=frame.camera_id or self.config.camera_id,
+                                   frame_id=frame.frame_id, image=frame.jpeg)
         request.capture_time.FromNanoseconds(frame.capture_time_ns)
         if self.config.min_score is not None:
             request.min_score = self.config.min_score
@@ -111,8 +114,8 @@ class Gateway:
         self._exhausted = frame is None
         return frame
 
-    def _answer(self, response: pb.DetectResponse, outstanding: set[str]) -> None:
-        outstanding.discard(response.frame_id)
+    def _answer(self, response: pb.DetectResponse, outstanding: set[tuple[str, str]]) -> None:
+        outstanding.discard((response.camera_id, response.frame_id))
         if response.status == Status.DROPPED:
             self.counts.dropped += 1
         else:
@@ -120,7 +123,7 @@ class Gateway:
             self.counts.errors += response.status == Status.ERROR
         self.write_line(json.dumps(response_to_json(response)))
 
-    async def _stream_once(self, outstanding: set[str]) -> None:
+    async def _stream_once(self, outstanding: set[tuple[str, str]]) -> None:
         """One StreamDetect call until the source ends (or the call fails)."""
         fps = self.config.fps if self.config.fps is not None else self.source.native_fps
         pacer = _Pacer(fps)
@@ -139,12 +142,13 @@ class Gateway:
                         self._carry = frame
                         await reader
                         raise ConnectionError("the stream ended before the source did")
+                    request = self._request(frame)
                     try:
-                        await call.write(self._request(frame))
+                        await call.write(request)
                     except _STREAM_ERRORS:
                         self._carry = frame
                         raise
-                    outstanding.add(frame.frame_id)
+                    outstanding.add((request.camera_id, request.frame_id))
                     self.counts.sent += 1
                 await call.done_writing()
                 await reader
@@ -154,7 +158,7 @@ class Gateway:
     async def run(self) -> GatewayCounts:
         backoff = 0.5
         while True:
-            outstanding: set[str] = set()
+            outstanding: set[tuple[str, str]] = set()
             answered_before = self.counts.answered + self.counts.dropped
             try:
                 await self._stream_once(outstanding)

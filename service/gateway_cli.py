@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 from typing import TextIO
 
-from service.frame_sources import ReopenPolicy, open_source
+from service.frame_sources import FrameSource, InterleavedSource, ReopenPolicy, open_source
 from service.gateway import Gateway, GatewayConfig
 
 
@@ -20,12 +20,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--server", required=True, metavar="HOST:PORT",
                         help="gRPC address, e.g. localhost:50051")
-    parser.add_argument("--camera", required=True, metavar="ID", help="camera id in the server's registry")
-    parser.add_argument("--source", required=True, metavar="SRC",
+    parser.add_argument("--camera", required=True, metavar="ID", action="append",
+                        help="camera id in the server's registry; repeat --camera ID --source SRC to "
+                             "stream several cameras (e.g. of one site) on one stream, a frame of each in "
+                             "turn")
+    parser.add_argument("--source", required=True, metavar="SRC", action="append",
                         help="video file, rtsp:// or http:// URL, folder of images, or webcam index (0)")
     parser.add_argument("--fps", type=float, default=None,
-                        help="send at most N frames per second (default: a video file's own rate; "
-                             "folders and live sources unpaced; 0: unpaced)")
+                        help="send at most N frames per second of each camera (default: a video file's "
+                             "own rate; folders and live sources unpaced; 0: unpaced)")
     parser.add_argument("--min-score", type=float, default=None,
                         help="score threshold (default: the model's)")
     parser.add_argument("--out", type=Path, default=None, help="write the JSON lines here instead of stdout")
@@ -37,13 +40,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s",
                         stream=sys.stderr)
+    if len(args.camera) != len(args.source) or len(set(args.camera)) != len(args.camera):
+        print("fishloc gateway: give one --source per --camera, each camera once", file=sys.stderr)
+        return 2
     try:
         reopen = ReopenPolicy(first_backoff_s=min(0.5, args.max_backoff), max_backoff_s=args.max_backoff)
-        source = open_source(args.source, reopen)
+        pairs = zip(args.camera, args.source, strict=True)
+        sources = {camera: open_source(src, reopen) for camera, src in pairs}
     except ValueError as error:
         print(f"fishloc gateway: {error}", file=sys.stderr)
         return 2
-    config = GatewayConfig(server=args.server, camera_id=args.camera, fps=args.fps,
+    source: FrameSource = sources[args.camera[0]] if len(sources) == 1 else InterleavedSource(sources)
+    fps = args.fps * len(sources) if args.fps else args.fps
+    config = GatewayConfig(server=args.server, camera_id=args.camera[0], fps=fps,
                            min_score=args.min_score, max_backoff_s=args.max_backoff)
     out: TextIO = args.out.open("w", encoding="utf-8") if args.out is not None else sys.stdout
 

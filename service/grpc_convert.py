@@ -37,6 +37,8 @@ def detection_from_json(item: dict[str, Any]) -> pb.Detection:
     )
     if item["distance_m"] is not None:
         message.distance_m = item["distance_m"]
+    if item["track_id"] is not None:
+        message.track_id = item["track_id"]
     return message
 
 
@@ -71,6 +73,7 @@ def detection_to_json(message: pb.Detection) -> dict[str, Any]:
         "position_m": _pair(message, "position_m"),
         "distance_m": message.distance_m if message.HasField("distance_m") else None,
         "site_position_m": _pair(message, "site_position_m"),
+        "track_id": message.track_id if message.HasField("track_id") else None,
     }
 
 
@@ -113,6 +116,8 @@ def camera_to_message(camera: FisheyeCamera) -> pb.Camera:
         message.max_theta_deg = camera.max_theta_deg
     if "site_pose" in record:
         message.site_pose.CopyFrom(pb.SitePose(**record["site_pose"]))
+    if camera.site is not None:
+        message.site = camera.site
     if camera.tilt_deg is not None:
         message.tilt_deg.CopyFrom(pb.Point(x=camera.tilt_deg[0], y=camera.tilt_deg[1]))
     for polygon in camera.masks_px or []:
@@ -133,6 +138,8 @@ def message_to_camera(message: pb.Camera) -> FisheyeCamera:
     if message.HasField("site_pose"):
         pose = message.site_pose
         record["site_pose"] = {"x_m": pose.x_m, "y_m": pose.y_m, "yaw_deg": pose.yaw_deg}
+    if message.HasField("site"):
+        record["site"] = message.site
     if message.HasField("tilt_deg"):
         record["tilt_deg"] = [message.tilt_deg.x, message.tilt_deg.y]
     if message.masks_px:
@@ -147,3 +154,42 @@ def model_to_message(info: ModelInfo) -> pb.ModelInfo:
         box_format=info.box_format, default_min_score=info.default_min_score, pad_value=info.pad_value,
         sha256=info.sha256,
     )
+
+
+# ----- sites
+
+
+def occupancy_to_message(occupancy: dict[str, Any]) -> pb.SiteOccupancy:
+    """The gRPC form of a site's occupancy answer (`sites.SiteTracker.occupancy`)."""
+    message = pb.SiteOccupancy(site=occupancy["site"], count=occupancy["count"])
+    if occupancy["time"] is not None:
+        message.time = occupancy["time"]
+    for person in occupancy["people"]:
+        message.people.append(pb.TrackedPerson(
+            track_id=person["track_id"], position_m=_point(person["position_m"]),
+            velocity_mps=_point(person["velocity_mps"]), cameras=person["cameras"],
+            first_seen=person["first_seen"], last_seen=person["last_seen"], dwell_s=person["dwell_s"],
+        ))
+    for zone, figures in occupancy["zones"].items():
+        message.zones[zone].count = figures["count"]
+    for line, tally in occupancy["lines"].items():
+        message.lines[line].in_count = tally["in"]
+        message.lines[line].out_count = tally["out"]
+    return message
+
+
+def occupancy_from_message(message: pb.SiteOccupancy) -> dict[str, Any]:
+    """The REST-shaped occupancy dict of a message (what a watching client prints)."""
+    return {
+        "site": message.site,
+        "time": message.time if message.HasField("time") else None,
+        "count": message.count,
+        "people": [{
+            "track_id": person.track_id, "position_m": _pair(person, "position_m"),
+            "velocity_mps": _pair(person, "velocity_mps"), "cameras": list(person.cameras),
+            "first_seen": person.first_seen, "last_seen": person.last_seen, "dwell_s": dict(person.dwell_s),
+        } for person in message.people],
+        "zones": {zone: {"count": figures.count} for zone, figures in sorted(message.zones.items())},
+        "lines": {line: {"in": tally.in_count, "out": tally.out_count}
+                  for line, tally in sorted(message.lines.items())},
+    }

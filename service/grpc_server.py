@@ -20,12 +20,14 @@ from fisheye import CalibrationError, FisheyeCamera
 from fisheye.camera import CAMERA_ID_PATTERN
 from protos.fishloc.v1 import localizer_pb2 as pb
 from protos.fishloc.v1 import localizer_pb2_grpc as pb_grpc
-from service.dependencies import ServiceState, bearer_matches
+from service.capture_time import CaptureTimeError, check_unix_s
+from service.dependencies import ServiceState, bearer_matches, read_token_passes
 from service.frame_decode import FrameError
 from service.grpc_convert import (
     camera_to_message,
     message_to_camera,
     model_to_message,
+    occupancy_to_message,
     response_for,
     result_to_response,
 )
@@ -33,6 +35,7 @@ from service.grpc_stream import FrameStream
 from service.result import DetectionResult
 from service.runner import OverloadedError
 from service.tls import TlsFiles
+from sites.layout import NAME_PATTERN
 
 log = logging.getLogger(__name__)
 
@@ -120,6 +123,15 @@ class LocalizerServicer:
             raise _FrameRefusedError("camera_not_found", f"no camera {camera_id!r} in the registry")
         return camera
 
+    def _capture_time(self, request: pb.DetectRequest) -> float | None:
+        if not request.HasField("capture_time"):
+            return None
+        stamp = request.capture_time
+        try:
+            return check_unix_s(stamp.seconds + stamp.nanos * 1e-9)
+        except CaptureTimeError as error:
+            raise _FrameRefusedError("invalid_capture_time", str(error)) from None
+
     def _min_score(self, request: pb.DetectRequest) -> float | None:
         if not request.HasField("min_score"):
             return None
@@ -145,7 +157,8 @@ class LocalizerServicer:
         try:
             camera = await self._camera(request)
             result = await runner.detect(request.image, camera, min_score=self._min_score(request),
-                                         frame_id=request.frame_id or None, frontend="grpc")
+                                         frame_id=request.frame_id or None, frontend="grpc",
+                                         capture_time=self._capture_time(request))
         except _FrameRefusedError as error:
             not_found = error.code == "camera_not_found"
             status = grpc.StatusCode.NOT_FOUND if not_found else grpc.StatusCode.INVALID_ARGUMENT
@@ -163,6 +176,7 @@ class LocalizerServicer:
                 raise _FrameRefusedError("not_ready", "the model is warming up")
             camera = await self._camera(request)
             min_score = self._min_score(request)
+            capture_time = self._capture_time(request)
             # A lane holds one frame at a time, so waiting for room here is bounded per stream;
             # newer frames of this camera meanwhile replace the waiting one (DROPPED).
             while not runner.try_admit():
@@ -170,7 +184,7 @@ class LocalizerServicer:
             try:
                 result: DetectionResult = await runner.run_admitted(
                     request.image, camera, min_score=min_score, frame_id=request.frame_id or None,
-                    frontend="grpc-stream",
+                    frontend="grpc-stream", capture_time=capture_time,
                 )
             finally:
                 runner.release()
@@ -226,6 +240,7 @@ class LocalizerServicer:
         except CalibrationError as error:
             await _abort(context, grpc.StatusCode.INVALID_ARGUMENT, str(error))
         outcome = await asyncio.to_thread(self.state.registry.put, camera)
+        await asyncio.to_thread(self.state.sites.camera_changed, camera.id, outcome.camera)
         return pb.PutCameraResponse(camera=camera_to_message(outcome.camera), created=outcome.created)
 
     async def DeleteCamera(self, request: pb.DeleteCameraRequest,  # noqa: N802
@@ -234,10 +249,33 @@ class LocalizerServicer:
         await self._require_camera_id(request.camera_id, context)
         if not await asyncio.to_thread(self.state.registry.delete, request.camera_id):
             await _abort(context, grpc.StatusCode.NOT_FOUND, f"no camera {request.camera_id!r}")
+        await asyncio.to_thread(self.state.sites.camera_changed, request.camera_id, None)
         return pb.DeleteCameraResponse()
 
     async def GetModel(self, request: pb.GetModelRequest, context: grpc.aio.ServicerContext) -> pb.ModelInfo:  # noqa: N802
         return model_to_message(self.state.runner.pipeline.info)
+
+    # ----- sites
+
+    async def WatchSite(self, request: pb.WatchSiteRequest,  # noqa: N802
+                        context: grpc.aio.ServicerContext) -> AsyncIterator[pb.SiteOccupancy]:
+        if not read_token_passes(self.state, _authorization(context)):
+            await _abort(context, grpc.StatusCode.UNAUTHENTICATED,
+                         "site reads need 'authorization: Bearer <token>'")
+        site_id = request.site
+        if re.fullmatch(NAME_PATTERN, site_id) is None:
+            await _abort(context, grpc.StatusCode.INVALID_ARGUMENT,
+                         f"invalid_request: site {_shown(site_id)} is not a site id")
+        if site_id not in await asyncio.to_thread(self.state.site_store.site_cameras):
+            await _abort(context, grpc.StatusCode.NOT_FOUND,
+                         f"site_not_found: no camera names site {site_id!r}")
+        sites = self.state.sites
+        watcher = await asyncio.to_thread(sites.watch, site_id, asyncio.get_running_loop())
+        try:
+            async for update in watcher.updates():
+                yield occupancy_to_message(update)
+        finally:
+            sites.unwatch(site_id, watcher)
 
 
 class GrpcFrontEnd:

@@ -71,3 +71,12 @@ async def read_body(request: Request, limits: BodyLimits) -> bytes:
         raise ApiError(400, "client_disconnected", "the client closed the connection mid-body",
                        headers=CLOSE) from None
     return b"".join(chunks)
+
+
+async def read_json_object(request: Request, limits: BodyLimits, what: str, code: str) -> dict[str, Any]:
+    """A body that must be one JSON object (`what`, e.g. "a camera record"): 400 `bad_json` when it
+    is not JSON, 422 `code` when it is JSON but not an object."""
+    record = await read_json(request, limits, what)
+    if not isinstance(record, dict):
+        raise ApiError(422, code, f"the body must be a JSON object ({what})")
+    return record

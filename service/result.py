@@ -1,8 +1,8 @@
 """The pipeline's typed result, which the REST and gRPC front ends both serialise.
 
-`Detections` holds N people as parallel arrays; `DetectionResult` adds the frame, camera, model and
-per-stage timings. Positions are NaN where a foot point has no floor point; the JSON form writes
-those as `null`.
+`Detections` holds N people as parallel arrays; `DetectionResult` adds the frame, camera, model,
+per-stage timings and, for a camera of a site, the track each person joined. Positions are NaN where
+a foot point has no floor point; the JSON form writes those as `null`.
 """
 
 from __future__ import annotations
@@ -89,6 +89,8 @@ class DetectionResult:
     detections: Detections
     timing_ms: dict[str, float] = field(default_factory=dict)
     masked: int = 0  # detections dropped because their foot point fell inside one of the camera's masks
+    # For a camera of a site: (N,) the confirmed track of each detection (None: not (yet) tracked).
+    track_ids: tuple[str | None, ...] | None = None
 
 
 def _number(value: float, digits: int) -> float | None:
@@ -101,7 +103,7 @@ def _pair(values: FloatArray, digits: int) -> list[float] | None:
     return [round(float(values[0]), digits), round(float(values[1]), digits)]
 
 
-def detection_to_json(detections: Detections, index: int) -> dict[str, Any]:
+def detection_to_json(detections: Detections, index: int, track_id: str | None = None) -> dict[str, Any]:
     """The JSON object of one detection (DESIGN.md's `detect` answer)."""
     cx, cy, w, h = (float(v) for v in detections.cxcywh[index])
     site = detections.site_position_m
@@ -114,6 +116,7 @@ def detection_to_json(detections: Detections, index: int) -> dict[str, Any]:
         "position_m": _pair(detections.position_m[index], 4),
         "distance_m": _number(detections.distance_m[index], 4),
         "site_position_m": None if site is None else _pair(site[index], 4),
+        "track_id": track_id,
     }
 
 
@@ -124,6 +127,7 @@ def result_to_json(result: DetectionResult) -> dict[str, Any]:
         "frame_id": result.frame_id,
         "image": {"width": result.image_wh[0], "height": result.image_wh[1]},
         "model": {"name": result.model_name, "version": result.model_version},
-        "detections": [detection_to_json(result.detections, i) for i in range(len(result.detections))],
+        "detections": [detection_to_json(result.detections, i, None if result.track_ids is None
+                                         else result.track_ids[i]) for i in range(len(result.detections))],
         "timing_ms": {stage: round(result.timing_ms.get(stage, 0.0), 3) for stage in STAGES},
     }

@@ -12,7 +12,8 @@ import contextlib
 import contextvars
 import logging
 import threading
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -28,6 +29,10 @@ from service.pipeline import Pipeline, PipelineConfig
 from service.result import DetectionResult
 
 log = logging.getLogger(__name__)
+
+
+# What follows the pipeline for a camera of a site (`SiteHub.track`): the result with its track ids.
+SiteTracking = Callable[[FisheyeCamera, DetectionResult, float], DetectionResult]
 
 
 class OverloadedError(RuntimeError):
@@ -57,6 +62,7 @@ class InferenceRunner:
         self._in_flight = 0
         self._ready = threading.Event()
         self.latest = LatestFrames()  # what the viewer shows: each camera's last frame, any front end
+        self.site_tracking: SiteTracking | None = None
         info = pipeline.info
         labels = {"name": info.name, "version": info.version, "input_size": str(info.input_size)}
         metrics.model_info.labels(**labels).set(1)
@@ -103,22 +109,35 @@ class InferenceRunner:
             self.release()
 
     async def detect(self, data: bytes, camera: FisheyeCamera, *, min_score: float | None,
-                     frame_id: str | None, frontend: str) -> DetectionResult:
+                     frame_id: str | None, frontend: str,
+                     capture_time: float | None = None) -> DetectionResult:
         """Admit, run the pipeline in the pool, record metrics. Raises OverloadedError or FrameError."""
         with self.admitted(frontend):
             return await self.run_admitted(data, camera, min_score=min_score, frame_id=frame_id,
-                                           frontend=frontend)
+                                           frontend=frontend, capture_time=capture_time)
+
+    def _detect_and_track(self, data: bytes, camera: FisheyeCamera, min_score: float | None,
+                          frame_id: str | None, capture_time: float) -> DetectionResult:
+        result = self.pipeline.detect(data, camera, min_score=min_score, frame_id=frame_id)
+        if self.site_tracking is None:
+            return result
+        # Called for cameras without a site too: one that left its site (by a write through another
+        # process) ends its tracks there with its next frame.
+        return self.site_tracking(camera, result, capture_time)
 
     async def run_admitted(self, data: bytes, camera: FisheyeCamera, *, min_score: float | None,
-                           frame_id: str | None, frontend: str) -> DetectionResult:
-        """Run a frame that already holds an in-flight slot."""
+                           frame_id: str | None, frontend: str,
+                           capture_time: float | None = None) -> DetectionResult:
+        """Run a frame that already holds an in-flight slot; a frame of a site's camera joins its
+        site's tracks at `capture_time` (Unix s; default: now, its arrival) before this returns."""
+        when = time.time() if capture_time is None else capture_time
         loop = asyncio.get_running_loop()
         # run_in_executor does not carry context variables into the pool (asyncio.to_thread does):
         # without this, the pipeline's log lines would lose the request id.
         context = contextvars.copy_context()
         try:
             result = await loop.run_in_executor(self._executor, lambda: context.run(
-                self.pipeline.detect, data, camera, min_score=min_score, frame_id=frame_id,
+                self._detect_and_track, data, camera, min_score, frame_id, when,
             ))
         except FrameError as error:
             self.metrics.frame_errors.labels(code=error.code).inc()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from pydantic import BaseModel, Field
 
 from fisheye import FisheyeCamera
@@ -38,6 +40,10 @@ class Detection(BaseModel):
     distance_m: float | None = Field(description="distance from the nadir (m)")
     site_position_m: list[float] | None = Field(
         description="[x, y] m in the site frame, when the camera has a site pose"
+    )
+    track_id: str | None = Field(
+        description="the site's track this person joined (e.g. hall-a:17); null for a camera without a "
+                    "site and until a track is confirmed"
     )
 
 
@@ -128,3 +134,21 @@ def error_responses(*statuses: int) -> dict[int | str, dict[str, object]]:
         status: {"model": ErrorResponse, "description": descriptions.get(status, "error")}
         for status in statuses
     }
+
+
+def inline_schema(model: type[BaseModel]) -> dict[str, Any]:
+    """The JSON schema of `model` with its nested models written in place (a request body schema of
+    the OpenAPI document cannot point into the model's own `$defs`)."""
+    schema = model.model_json_schema()
+    definitions = schema.pop("$defs", {})
+
+    def resolve(node: Any) -> Any:
+        if isinstance(node, dict):
+            if "$ref" in node:
+                return resolve(definitions[node["$ref"].rsplit("/", 1)[-1]])
+            return {key: resolve(value) for key, value in node.items()}
+        if isinstance(node, list):
+            return [resolve(value) for value in node]
+        return node
+
+    return dict(resolve(schema))

@@ -25,6 +25,8 @@ from service.grpc_server import GrpcFrontEnd
 from service.http_protocol import head_deadline_protocol
 from service.metrics import ServiceMetrics
 from service.runner import build_runner
+from service.site_hub import SiteHub
+from service.site_store import SiteStore
 from service.tls import TlsFiles, tls_from_settings
 
 log = logging.getLogger(__name__)
@@ -55,7 +57,11 @@ def build_state(settings: Settings) -> ServiceState:
         registry.close()
         runner.close()
         raise
-    return ServiceState(settings=settings, runner=runner, registry=registry, metrics=metrics)
+    site_store = SiteStore(registry)
+    sites = SiteHub(site_store, metrics)
+    runner.site_tracking = sites.track
+    return ServiceState(settings=settings, runner=runner, registry=registry, metrics=metrics,
+                        site_store=site_store, sites=sites)
 
 
 class Service:
@@ -124,6 +130,7 @@ class Service:
 
     async def stop(self) -> None:
         """Stop accepting, answer what is in flight, then release the model and the database."""
+        self.state.sites.close()  # event streams end, so the HTTP server need not wait for them
         if self._http is not None:
             self._http.should_exit = True
         stopping = [self.wait()] if self.grpc is None else [self.grpc.stop(), self.wait()]

@@ -1,8 +1,11 @@
-"""Where the feet touch the floor: a foot branch on the YOLOX box branch (polar view).
+"""Where the feet touch the floor: a third branch of the YOLOX head (polar view).
 
 The box-side foot point (the middle of a box's side nearest the principal point) is the edge of the
-visible silhouette, not the feet: shoulders, a leaning torso, a chair. Each cell of a network with
-`YoloxConfig.foot` also predicts the contact point as two offsets from its own box, in box sizes:
+visible silhouette, not the feet: shoulders, a leaning torso, a chair. A network with
+`YoloxConfig.foot` has a third branch beside the class and box branches of its head: two 3x3
+convolutions on the level's stem output (started as a copy of the box branch, so it starts from
+features that already find a person's extent) and a 1x1 prediction. Each cell predicts the contact
+point as two offsets from its own box, in box sizes:
 
     foot_x = cx + a · w,    foot_y = y2 + b · h        (strip px, xyxy box, y2 the bottom side)
 
@@ -38,19 +41,21 @@ MAX_METRES_PER_PX = 0.1  # cap of the loss weight (module docstring)
 
 
 class FootHead(nn.Module):
-    """Box-branch features of the 3 levels (B, width, h_i, w_i) -> offsets (B, 2, h_i, w_i)."""
+    """The head's stem outputs of the 3 levels (B, width, h_i, w_i) -> offsets (B, 2, h_i, w_i)."""
 
     def __init__(self, width: int, levels: int, depthwise: bool) -> None:
         super().__init__()
-        self.convs = nn.ModuleList([conv_block(width, width, 3, 1, depthwise) for _ in range(levels)])
+        self.convs = nn.ModuleList([nn.Sequential(conv_block(width, width, 3, 1, depthwise),
+                                                  conv_block(width, width, 3, 1, depthwise))
+                                    for _ in range(levels)])
         self.preds = nn.ModuleList([nn.Conv2d(width, FOOT_CHANNELS, 1) for _ in range(levels)])
         for pred in self.preds:
             assert isinstance(pred, nn.Conv2d) and pred.bias is not None
             nn.init.zeros_(pred.weight)
             nn.init.zeros_(pred.bias)
 
-    def forward(self, reg_features: Sequence[Tensor]) -> list[Tensor]:
-        return [pred(conv(x)) for x, conv, pred in zip(reg_features, self.convs, self.preds, strict=True)]
+    def forward(self, stem_features: Sequence[Tensor]) -> list[Tensor]:
+        return [pred(conv(x)) for x, conv, pred in zip(stem_features, self.convs, self.preds, strict=True)]
 
 
 def foot_from_offsets(offsets: Tensor, cxcywh: Tensor) -> Tensor:

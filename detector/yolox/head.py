@@ -50,10 +50,10 @@ class YoloxHead(nn.Module):
         return self.forward_features(features)[0]
 
     def forward_features(self, features: Sequence[Tensor]) -> tuple[list[Tensor], list[Tensor]]:
-        """The maps and, per level, the box branch's features (B, width, h, w) they came from
-        (what a foot branch reads, `detector.yolox.foot`)."""
+        """The maps and, per level, the stem's output (B, width, h, w) both branches read (what a
+        foot branch reads too, `detector.yolox.foot`)."""
         maps: list[Tensor] = []
-        box_features: list[Tensor] = []
+        stem_features: list[Tensor] = []
         for x, stem, cls_conv, reg_conv, cls_pred, reg_pred, obj_pred in zip(
                 features, self.stems, self.cls_convs, self.reg_convs, self.cls_preds, self.reg_preds,
                 self.obj_preds, strict=True):
@@ -63,5 +63,5 @@ class YoloxHead(nn.Module):
             box = reg_pred(reg_features)  # (B, 4, h, w)
             obj_logit = obj_pred(reg_features)  # (B, 1, h, w)
             maps.append(torch.cat([box, obj_logit, cls_logits], dim=1))  # (B, 5 + C, h, w)
-            box_features.append(reg_features)
-        return maps, box_features
+            stem_features.append(x)
+        return maps, stem_features

@@ -90,17 +90,20 @@ class YoloxNano(nn.Module):
         """The maps and the foot offsets (B, 2, H/s, W/s) per stride s (a network with a foot branch)."""
         if self.foot is None:
             raise ValueError("this network has no foot branch (YoloxConfig.foot)")
-        maps, box_features = self.head.forward_features(self.neck(self.backbone(images)))
-        offsets: list[Tensor] = self.foot(box_features)
+        maps, stem_features = self.head.forward_features(self.neck(self.backbone(images)))
+        offsets: list[Tensor] = self.foot(stem_features)
         return maps, offsets
 
     def with_foot(self) -> YoloxNano:
-        """A copy with a new foot branch (answering the box-side foot point until trained); every
-        other weight is copied unchanged."""
+        """A copy with a new foot branch (its convolutions a copy of the box branch's, its offsets
+        zero: the box-side foot point until trained); every other weight is copied unchanged."""
         footed = YoloxNano(replace(self.config, foot=True))
         missing, unexpected = footed.load_state_dict(self.state_dict(), strict=False)
         if unexpected or not all(key.startswith("foot.") for key in missing):
             raise ValueError(f"with_foot: unexpected weights {unexpected}, missing {missing}")
+        assert footed.foot is not None
+        for foot_convs, box_convs in zip(footed.foot.convs, footed.head.reg_convs, strict=True):
+            foot_convs.load_state_dict(box_convs.state_dict())
         device = next(self.parameters()).device
         return footed.to(device).train(self.training)
 

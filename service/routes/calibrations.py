@@ -30,7 +30,7 @@ from fisheye.camera_file import describe_validation_error
 from service.dependencies import State
 from service.errors import ApiError
 from service.request_body import BodyLimits, read_json
-from service.schemas import CalibrationFit, error_responses
+from service.schemas import CalibrationFit, error_responses, inline_schema
 
 router = APIRouter(tags=["calibrations"])
 
@@ -82,24 +82,6 @@ class FitRequest(BaseModel):
                                   "image_size (same aspect ratio; the marks are scaled)")
     marks: list[Mark] = Field(min_length=1, max_length=MAX_MARKS)
     options: FitOptions = Field(default_factory=FitOptions)
-
-
-def _inline_schema(model: type[BaseModel]) -> dict[str, Any]:
-    """The JSON schema of `model` with its nested models written in place (a request body schema of
-    the OpenAPI document cannot point into the model's own `$defs`)."""
-    schema = model.model_json_schema()
-    definitions = schema.pop("$defs", {})
-
-    def resolve(node: Any) -> Any:
-        if isinstance(node, dict):
-            if "$ref" in node:
-                return resolve(definitions[node["$ref"].rsplit("/", 1)[-1]])
-            return {key: resolve(value) for key, value in node.items()}
-        if isinstance(node, list):
-            return [resolve(value) for value in node]
-        return node
-
-    return dict(resolve(schema))
 
 
 def _marks(request: FitRequest) -> RulerMarks:
@@ -166,7 +148,7 @@ def fit_to_json(request: FitRequest, fit: RulerFit) -> dict[str, Any]:
                 "not_monotonic, frame_size_mismatch, fit_failed, invalid_marks, invalid_options). Save "
                 "the camera with `PUT /v1/cameras/{id}`.",
     openapi_extra={"requestBody": {"required": True, "content": {
-        "application/json": {"schema": _inline_schema(FitRequest)}}}},
+        "application/json": {"schema": inline_schema(FitRequest)}}}},
 )
 async def fit_calibration(request: Request, state: State) -> JSONResponse:
     record = await read_json(request, BodyLimits(_MAX_BODY_BYTES, state.settings.body_timeout_s),

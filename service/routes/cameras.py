@@ -11,7 +11,7 @@ from fisheye import CalibrationError, FisheyeCamera, camera_to_dict
 from fisheye.camera import CAMERA_ID_PATTERN
 from service.dependencies import State, WriteAccess
 from service.errors import ApiError
-from service.request_body import BodyLimits, read_json
+from service.request_body import BodyLimits, read_json_object
 from service.schemas import CameraList, error_responses
 
 router = APIRouter(tags=["cameras"])
@@ -61,14 +61,13 @@ async def get_camera(state: State, camera_id: str = CameraId) -> dict[str, Any]:
 )
 async def put_camera(request: Request, response: Response, state: State,
                      camera_id: str = CameraId) -> dict[str, Any]:
-    record = await read_json(request, BodyLimits(_MAX_RECORD_BYTES, state.settings.body_timeout_s),
-                             "a camera record")
-    if not isinstance(record, dict):
-        raise ApiError(422, "invalid_camera", "the body must be a JSON object (a camera record)")
+    limits = BodyLimits(_MAX_RECORD_BYTES, state.settings.body_timeout_s)
+    record = await read_json_object(request, limits, "a camera record", "invalid_camera")
     try:
         outcome = await run_in_threadpool(state.registry.put_record, camera_id, record)
     except CalibrationError as error:
         raise ApiError(422, "invalid_camera", str(error)) from None
+    await run_in_threadpool(state.sites.camera_changed, camera_id, outcome.camera)
     response.status_code = status.HTTP_201_CREATED if outcome.created else status.HTTP_200_OK
     return camera_to_dict(outcome.camera)
 
@@ -79,4 +78,5 @@ async def put_camera(request: Request, response: Response, state: State,
 async def delete_camera(state: State, camera_id: str = CameraId) -> Response:
     if not await run_in_threadpool(state.registry.delete, camera_id):
         raise not_found(camera_id)
+    await run_in_threadpool(state.sites.camera_changed, camera_id, None)
     return Response(status_code=204)

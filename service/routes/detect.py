@@ -12,6 +12,7 @@ from starlette.datastructures import UploadFile
 from starlette.formparsers import MultiPartException, MultiPartParser
 
 from fisheye.camera import CAMERA_ID_PATTERN
+from service.capture_time import CaptureTimeError, parse_capture_time
 from service.dependencies import DetectAccess, ServiceState, State
 from service.errors import ApiError, frame_error
 from service.frame_decode import FrameError
@@ -100,7 +101,15 @@ async def detect(
                                     description="score threshold (default: the model's)"),
     frame_id: str | None = Query(None, max_length=128, description="echoed in the answer"),
     render: Literal["jpeg"] | None = Query(None, description="jpeg: answer with the frame, detections drawn"),
+    capture_time: str | None = Query(
+        None, max_length=64, description="when the camera took the frame: Unix seconds or an RFC 3339 "
+                                         "date-time with offset (default: its arrival); a site's tracks "
+                                         "follow this clock"),
 ) -> Response:
+    try:
+        captured = None if capture_time is None else parse_capture_time(capture_time)
+    except CaptureTimeError as error:
+        raise ApiError(422, "invalid_capture_time", str(error)) from None
     if not state.runner.ready:
         raise ApiError(503, "not_ready", "the model is warming up", headers={"Retry-After": "1"})
     camera = await run_in_threadpool(state.registry.get, camera_id)
@@ -114,7 +123,7 @@ async def detect(
         with runner.admitted("rest"):
             data = await frame_bytes(request, media_type, state)
             result = await runner.run_admitted(data, camera, min_score=min_score, frame_id=frame_id,
-                                               frontend="rest")
+                                               frontend="rest", capture_time=captured)
     except OverloadedError as error:
         # The body is left unread; closing the connection stops the server reading and discarding it.
         retry = {"Retry-After": str(error.retry_after_s)} | CLOSE

@@ -13,14 +13,15 @@ from pydantic import BaseModel, Field
 from starlette.concurrency import run_in_threadpool
 
 from fisheye.camera import CAMERA_ID_PATTERN
-from service.dependencies import ServiceState, State
+from service.dependencies import ReadAccess, ServiceState, State
 from service.errors import ApiError
 from service.latest import LatestFrame
 from service.result import result_to_json
 from service.routes.cameras import not_found
 from service.schemas import DetectResponse, error_responses
 
-router = APIRouter(tags=["latest frame"])
+# Latest frames show where people are: with a read token configured they need it.
+router = APIRouter(tags=["latest frame"], dependencies=[ReadAccess])
 
 CameraId = Path(pattern=CAMERA_ID_PATTERN, description="camera id")
 _NO_STORE = {"Cache-Control": "no-store"}

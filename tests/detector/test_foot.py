@@ -48,6 +48,11 @@ def test_an_untrained_branch_answers_the_box_side_and_leaves_the_boxes(footed: Y
     # The bottom side of a strip box is the side nearest the principal point.
     bottom_middle = torch.stack([(boxes[..., 0] + boxes[..., 2]) / 2, boxes[..., 3]], dim=-1)
     torch.testing.assert_close(foot, bottom_middle, atol=1e-4, rtol=0)
+    assert footed.foot is not None  # the branch starts as a copy of the box branch
+    for foot_convs, box_convs in zip(footed.foot.convs, footed.head.reg_convs, strict=True):
+        for (name, value), (_, box_value) in zip(foot_convs.state_dict().items(),
+                                                 box_convs.state_dict().items(), strict=True):
+            assert torch.equal(value, box_value), name
 
 
 def test_foot_targets_lead_back_to_the_floor_points(toy_dataset: Callable[..., Path]) -> None:

@@ -1,5 +1,5 @@
 """The reference gateway end to end: a folder and a short video file streamed to a real server,
-and reconnecting to a server that comes up late."""
+the cameras of a site on one stream, and reconnecting to a server that comes up late."""
 
 from __future__ import annotations
 
@@ -14,10 +14,12 @@ from pathlib import Path
 from typing import Any
 
 import cv2
+import httpx
 import numpy as np
 import pytest
 from service_frames import encode, person_frame
 from service_live_server import LiveServer, free_port
+from service_sites import MIN_SCORE, POSES, frame_of, put_site_cameras
 
 from fisheye import FisheyeCamera
 from service.config import Settings
@@ -197,3 +199,30 @@ def test_open_source_kinds(tmp_path: Path) -> None:
         open_source(str(tmp_path / "missing.mp4"))
     with pytest.raises(ValueError, match="no images"):
         open_source(str(tmp_path))
+
+
+def test_gateway_streams_the_cameras_of_a_site_on_one_stream(server: LiveServer, demo_camera: FisheyeCamera,
+                                                             tmp_path: Path) -> None:
+    with httpx.Client(base_url=server.url, timeout=30) as client:
+        put_site_cameras(client, demo_camera, site="gateway-site")
+    for camera_id in POSES:
+        folder = tmp_path / camera_id
+        folder.mkdir()
+        for index in range(8):  # one person standing where both cameras see them
+            (folder / f"{index:03d}.jpg").write_bytes(frame_of(demo_camera, camera_id, (0.0, 0.5)))
+    done = subprocess.run(
+        [sys.executable, "-m", "service.cli", "gateway", "--server", grpc_target(server),
+         "--camera", "cam-a", "--source", str(tmp_path / "cam-a"), "--camera", "cam-b",
+         "--source", str(tmp_path / "cam-b"), "--fps", "10", "--min-score", str(MIN_SCORE)],
+        capture_output=True, text=True, timeout=120, check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    lines = [json.loads(line) for line in done.stdout.splitlines()]
+    counts = json.loads(done.stderr.strip().splitlines()[-1])
+    assert counts["sent"] == 16 == counts["answered"] + counts["dropped"] and counts["errors"] == 0
+    tracked = {(line["camera_id"], line["detections"][0]["track_id"]) for line in lines
+               if line["status"] == "OK" and line["detections"][0]["track_id"] is not None}
+    assert tracked == {("cam-a", "gateway-site:1"), ("cam-b", "gateway-site:1")}
+    assert all("capture_time" in line for line in lines)
+    with httpx.Client(base_url=server.url, timeout=30) as client:
+        assert client.get("/v1/sites/gateway-site/occupancy").json()["count"] == 1

@@ -53,8 +53,9 @@ def test_detect_answers_positions(server: LiveServer, frame: tuple[bytes, tuple[
     assert set(body["timing_ms"]) == {"decode", "preprocess", "inference", "postprocess", "total"}
     person = body["detections"][0]
     assert set(person) == {
-        "score", "box", "corners", "foot_px", "position_m", "distance_m", "site_position_m",
+        "score", "box", "corners", "foot_px", "position_m", "distance_m", "site_position_m", "track_id",
     }
+    assert person["track_id"] is None  # the demo camera belongs to no site
     assert person["score"] == pytest.approx(0.9)
     assert set(person["box"]) == {"cx", "cy", "w", "h", "angle_deg"}
     assert len(person["corners"]) == 4

@@ -65,7 +65,8 @@ def test_openapi_documents_the_behaviour(live_server: LiveServer) -> None:
     }
     assert {"200", "400", "404", "413", "415", "422", "503"} <= set(detect["responses"])
     assert set(detect["responses"]["200"]["content"]) == {"application/json", "image/jpeg"}
-    assert {p["name"] for p in detect["parameters"]} == {"camera_id", "min_score", "frame_id", "render"}
+    assert {p["name"] for p in detect["parameters"]} == {"camera_id", "min_score", "frame_id", "render",
+                                                        "capture_time"}
     error = spec["components"]["schemas"]["ErrorResponse"]
     assert error["properties"]["error"]["$ref"].endswith("/ErrorBody")
     assert "FisheyeCamera" in spec["components"]["schemas"]

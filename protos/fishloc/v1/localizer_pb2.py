@@ -25,13 +25,19 @@ _sym_db = _symbol_database.Default()
 from google.protobuf import timestamp_pb2 as google_dot_protobuf_dot_timestamp__pb2
 
 
-DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n!protos/fishloc/v1/localizer.proto\x12\nfishloc.v1\x1a\x1fgoogle/protobuf/timestamp.proto\"\x9b\x01\n\rDetectRequest\x12\x11\n\tcamera_id\x18\x01 \x01(\t\x12\x10\n\x08\x66rame_id\x18\x02 \x01(\t\x12\x30\n\x0c\x63\x61pture_time\x18\x03 \x01(\x0b\x32\x1a.google.protobuf.Timestamp\x12\r\n\x05image\x18\x04 \x01(\x0c\x12\x16\n\tmin_score\x18\x05 \x01(\x01H\x00\x88\x01\x01\x42\x0c\n\n_min_score\"\x1d\n\x05Point\x12\t\n\x01x\x18\x01 \x01(\x01\x12\t\n\x01y\x18\x02 \x01(\x01\"F\n\x03\x42ox\x12\n\n\x02\x63x\x18\x01 \x01(\x01\x12\n\n\x02\x63y\x18\x02 \x01(\x01\x12\t\n\x01w\x18\x03 \x01(\x01\x12\t\n\x01h\x18\x04 \x01(\x01\x12\x11\n\tangle_deg\x18\x05 \x01(\x01\"\xfb\x01\n\tDetection\x12\r\n\x05score\x18\x01 \x01(\x01\x12\x1c\n\x03\x62ox\x18\x02 \x01(\x0b\x32\x0f.fishloc.v1.Box\x12\"\n\x07\x63orners\x18\x03 \x03(\x0b\x32\x11.fishloc.v1.Point\x12\"\n\x07\x66oot_px\x18\x04 \x01(\x0b\x32\x11.fishloc.v1.Point\x12%\n\nposition_m\x18\x05 \x01(\x0b\x32\x11.fishloc.v1.Point\x12\x17\n\ndistance_m\x18\x06 \x01(\x01H\x00\x88\x01\x01\x12*\n\x0fsite_position_m\x18\x07 \x01(\x0b\x32\x11.fishloc.v1.PointB\r\n\x0b_distance_m\"*\n\tImageSize\x12\r\n\x05width\x18\x01 \x01(\x05\x12\x0e\n\x06height\x18\x02 \x01(\x05\")\n\x08ModelRef\x12\x0c\n\x04name\x18\x01 \x01(\t\x12\x0f\n\x07version\x18\x02 \x01(\t\"c\n\x06Timing\x12\x0e\n\x06\x64\x65\x63ode\x18\x01 \x01(\x01\x12\x12\n\npreprocess\x18\x02 \x01(\x01\x12\x11\n\tinference\x18\x03 \x01(\x01\x12\x13\n\x0bpostprocess\x18\x04 \x01(\x01\x12\r\n\x05total\x18\x05 \x01(\x01\"\xa4\x03\n\x0e\x44\x65tectResponse\x12\x11\n\tcamera_id\x18\x01 \x01(\t\x12\x10\n\x08\x66rame_id\x18\x02 \x01(\t\x12\x30\n\x0c\x63\x61pture_time\x18\x03 \x01(\x0b\x32\x1a.google.protobuf.Timestamp\x12\x31\n\x06status\x18\x04 \x01(\x0e\x32!.fishloc.v1.DetectResponse.Status\x12\x12\n\nerror_code\x18\x05 \x01(\t\x12\x15\n\rerror_message\x18\x06 \x01(\t\x12$\n\x05image\x18\x07 \x01(\x0b\x32\x15.fishloc.v1.ImageSize\x12#\n\x05model\x18\x08 \x01(\x0b\x32\x14.fishloc.v1.ModelRef\x12)\n\ndetections\x18\t \x03(\x0b\x32\x15.fishloc.v1.Detection\x12%\n\ttiming_ms\x18\n \x01(\x0b\x32\x12.fishloc.v1.Timing\"@\n\x06Status\x12\x16\n\x12STATUS_UNSPECIFIED\x10\x00\x12\x06\n\x02OK\x10\x01\x12\x0b\n\x07\x44ROPPED\x10\x02\x12\t\n\x05\x45RROR\x10\x03\"5\n\x08SitePose\x12\x0b\n\x03x_m\x18\x01 \x01(\x01\x12\x0b\n\x03y_m\x18\x02 \x01(\x01\x12\x0f\n\x07yaw_deg\x18\x03 \x01(\x01\"\xd3\x02\n\x06\x43\x61mera\x12\n\n\x02id\x18\x01 \x01(\t\x12\x12\n\naltitude_m\x18\x02 \x01(\x01\x12)\n\nimage_size\x18\x03 \x01(\x0b\x32\x15.fishloc.v1.ImageSize\x12*\n\x0fprincipal_point\x18\x04 \x01(\x0b\x32\x11.fishloc.v1.Point\x12#\n\x08\x66ocal_px\x18\x05 \x01(\x0b\x32\x11.fishloc.v1.Point\x12\n\n\x02kb\x18\x06 \x03(\x01\x12\x1a\n\rmax_theta_deg\x18\x07 \x01(\x01H\x00\x88\x01\x01\x12\'\n\tsite_pose\x18\x08 \x01(\x0b\x32\x14.fishloc.v1.SitePose\x12#\n\x08tilt_deg\x18\n \x01(\x0b\x32\x11.fishloc.v1.Point\x12%\n\x08masks_px\x18\x0b \x03(\x0b\x32\x13.fishloc.v1.PolygonB\x10\n\x0e_max_theta_deg\",\n\x07Polygon\x12!\n\x06points\x18\x01 \x03(\x0b\x32\x11.fishloc.v1.Point\"\x14\n\x12ListCamerasRequest\":\n\x13ListCamerasResponse\x12#\n\x07\x63\x61meras\x18\x01 \x03(\x0b\x32\x12.fishloc.v1.Camera\"%\n\x10GetCameraRequest\x12\x11\n\tcamera_id\x18\x01 \x01(\t\"6\n\x10PutCameraRequest\x12\"\n\x06\x63\x61mera\x18\x01 \x01(\x0b\x32\x12.fishloc.v1.Camera\"H\n\x11PutCameraResponse\x12\"\n\x06\x63\x61mera\x18\x01 \x01(\x0b\x32\x12.fishloc.v1.Camera\x12\x0f\n\x07\x63reated\x18\x02 \x01(\x08\"(\n\x13\x44\x65leteCameraRequest\x12\x11\n\tcamera_id\x18\x01 \x01(\t\"\x16\n\x14\x44\x65leteCameraResponse\"\x11\n\x0fGetModelRequest\"\xa4\x01\n\tModelInfo\x12\x0c\n\x04name\x18\x01 \x01(\t\x12\x0f\n\x07version\x18\x02 \x01(\t\x12\x12\n\ninput_size\x18\x03 \x01(\x05\x12\x12\n\ntrained_on\x18\x04 \x01(\t\x12\x12\n\nbox_format\x18\x05 \x01(\t\x12\x19\n\x11\x64\x65\x66\x61ult_min_score\x18\x06 \x01(\x01\x12\x11\n\tpad_value\x18\x07 \x01(\x05\x12\x0e\n\x06sha256\x18\x08 \x01(\t2\x83\x04\n\tLocalizer\x12?\n\x06\x44\x65tect\x12\x19.fishloc.v1.DetectRequest\x1a\x1a.fishloc.v1.DetectResponse\x12I\n\x0cStreamDetect\x12\x19.fishloc.v1.DetectRequest\x1a\x1a.fishloc.v1.DetectResponse(\x01\x30\x01\x12N\n\x0bListCameras\x12\x1e.fishloc.v1.ListCamerasRequest\x1a\x1f.fishloc.v1.ListCamerasResponse\x12=\n\tGetCamera\x12\x1c.fishloc.v1.GetCameraRequest\x1a\x12.fishloc.v1.Camera\x12H\n\tPutCamera\x12\x1c.fishloc.v1.PutCameraRequest\x1a\x1d.fishloc.v1.PutCameraResponse\x12Q\n\x0c\x44\x65leteCamera\x12\x1f.fishloc.v1.DeleteCameraRequest\x1a .fishloc.v1.DeleteCameraResponse\x12>\n\x08GetModel\x12\x1b.fishloc.v1.GetModelRequest\x1a\x15.fishloc.v1.ModelInfob\x06proto3')
+DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n!protos/fishloc/v1/localizer.proto\x12\nfishloc.v1\x1a\x1fgoogle/protobuf/timestamp.proto\"\x9b\x01\n\rDetectRequest\x12\x11\n\tcamera_id\x18\x01 \x01(\t\x12\x10\n\x08\x66rame_id\x18\x02 \x01(\t\x12\x30\n\x0c\x63\x61pture_time\x18\x03 \x01(\x0b\x32\x1a.google.protobuf.Timestamp\x12\r\n\x05image\x18\x04 \x01(\x0c\x12\x16\n\tmin_score\x18\x05 \x01(\x01H\x00\x88\x01\x01\x42\x0c\n\n_min_score\"\x1d\n\x05Point\x12\t\n\x01x\x18\x01 \x01(\x01\x12\t\n\x01y\x18\x02 \x01(\x01\"F\n\x03\x42ox\x12\n\n\x02\x63x\x18\x01 \x01(\x01\x12\n\n\x02\x63y\x18\x02 \x01(\x01\x12\t\n\x01w\x18\x03 \x01(\x01\x12\t\n\x01h\x18\x04 \x01(\x01\x12\x11\n\tangle_deg\x18\x05 \x01(\x01\"\x9f\x02\n\tDetection\x12\r\n\x05score\x18\x01 \x01(\x01\x12\x1c\n\x03\x62ox\x18\x02 \x01(\x0b\x32\x0f.fishloc.v1.Box\x12\"\n\x07\x63orners\x18\x03 \x03(\x0b\x32\x11.fishloc.v1.Point\x12\"\n\x07\x66oot_px\x18\x04 \x01(\x0b\x32\x11.fishloc.v1.Point\x12%\n\nposition_m\x18\x05 \x01(\x0b\x32\x11.fishloc.v1.Point\x12\x17\n\ndistance_m\x18\x06 \x01(\x01H\x00\x88\x01\x01\x12*\n\x0fsite_position_m\x18\x07 \x01(\x0b\x32\x11.fishloc.v1.Point\x12\x15\n\x08track_id\x18\x08 \x01(\tH\x01\x88\x01\x01\x42\r\n\x0b_distance_mB\x0b\n\t_track_id\"*\n\tImageSize\x12\r\n\x05width\x18\x01 \x01(\x05\x12\x0e\n\x06height\x18\x02 \x01(\x05\")\n\x08ModelRef\x12\x0c\n\x04name\x18\x01 \x01(\t\x12\x0f\n\x07version\x18\x02 \x01(\t\"c\n\x06Timing\x12\x0e\n\x06\x64\x65\x63ode\x18\x01 \x01(\x01\x12\x12\n\npreprocess\x18\x02 \x01(\x01\x12\x11\n\tinference\x18\x03 \x01(\x01\x12\x13\n\x0bpostprocess\x18\x04 \x01(\x01\x12\r\n\x05total\x18\x05 \x01(\x01\"\xa4\x03\n\x0e\x44\x65tectResponse\x12\x11\n\tcamera_id\x18\x01 \x01(\t\x12\x10\n\x08\x66rame_id\x18\x02 \x01(\t\x12\x30\n\x0c\x63\x61pture_time\x18\x03 \x01(\x0b\x32\x1a.google.protobuf.Timestamp\x12\x31\n\x06status\x18\x04 \x01(\x0e\x32!.fishloc.v1.DetectResponse.Status\x12\x12\n\nerror_code\x18\x05 \x01(\t\x12\x15\n\rerror_message\x18\x06 \x01(\t\x12$\n\x05image\x18\x07 \x01(\x0b\x32\x15.fishloc.v1.ImageSize\x12#\n\x05model\x18\x08 \x01(\x0b\x32\x14.fishloc.v1.ModelRef\x12)\n\ndetections\x18\t \x03(\x0b\x32\x15.fishloc.v1.Detection\x12%\n\ttiming_ms\x18\n \x01(\x0b\x32\x12.fishloc.v1.Timing\"@\n\x06Status\x12\x16\n\x12STATUS_UNSPECIFIED\x10\x00\x12\x06\n\x02OK\x10\x01\x12\x0b\n\x07\x44ROPPED\x10\x02\x12\t\n\x05\x45RROR\x10\x03\"5\n\x08SitePose\x12\x0b\n\x03x_m\x18\x01 \x01(\x01\x12\x0b\n\x03y_m\x18\x02 \x01(\x01\x12\x0f\n\x07yaw_deg\x18\x03 \x01(\x01\"\xef\x02\n\x06\x43\x61mera\x12\n\n\x02id\x18\x01 \x01(\t\x12\x12\n\naltitude_m\x18\x02 \x01(\x01\x12)\n\nimage_size\x18\x03 \x01(\x0b\x32\x15.fishloc.v1.ImageSize\x12*\n\x0fprincipal_point\x18\x04 \x01(\x0b\x32\x11.fishloc.v1.Point\x12#\n\x08\x66ocal_px\x18\x05 \x01(\x0b\x32\x11.fishloc.v1.Point\x12\n\n\x02kb\x18\x06 \x03(\x01\x12\x1a\n\rmax_theta_deg\x18\x07 \x01(\x01H\x00\x88\x01\x01\x12\'\n\tsite_pose\x18\x08 \x01(\x0b\x32\x14.fishloc.v1.SitePose\x12\x11\n\x04site\x18\t \x01(\tH\x01\x88\x01\x01\x12#\n\x08tilt_deg\x18\n \x01(\x0b\x32\x11.fishloc.v1.Point\x12%\n\x08masks_px\x18\x0b \x03(\x0b\x32\x13.fishloc.v1.PolygonB\x10\n\x0e_max_theta_degB\x07\n\x05_site\",\n\x07Polygon\x12!\n\x06points\x18\x01 \x03(\x0b\x32\x11.fishloc.v1.Point\"\x14\n\x12ListCamerasRequest\":\n\x13ListCamerasResponse\x12#\n\x07\x63\x61meras\x18\x01 \x03(\x0b\x32\x12.fishloc.v1.Camera\"%\n\x10GetCameraRequest\x12\x11\n\tcamera_id\x18\x01 \x01(\t\"6\n\x10PutCameraRequest\x12\"\n\x06\x63\x61mera\x18\x01 \x01(\x0b\x32\x12.fishloc.v1.Camera\"H\n\x11PutCameraResponse\x12\"\n\x06\x63\x61mera\x18\x01 \x01(\x0b\x32\x12.fishloc.v1.Camera\x12\x0f\n\x07\x63reated\x18\x02 \x01(\x08\"(\n\x13\x44\x65leteCameraRequest\x12\x11\n\tcamera_id\x18\x01 \x01(\t\"\x16\n\x14\x44\x65leteCameraResponse\"\x11\n\x0fGetModelRequest\"\xa4\x01\n\tModelInfo\x12\x0c\n\x04name\x18\x01 \x01(\t\x12\x0f\n\x07version\x18\x02 \x01(\t\x12\x12\n\ninput_size\x18\x03 \x01(\x05\x12\x12\n\ntrained_on\x18\x04 \x01(\t\x12\x12\n\nbox_format\x18\x05 \x01(\t\x12\x19\n\x11\x64\x65\x66\x61ult_min_score\x18\x06 \x01(\x01\x12\x11\n\tpad_value\x18\x07 \x01(\x05\x12\x0e\n\x06sha256\x18\x08 \x01(\t\" \n\x10WatchSiteRequest\x12\x0c\n\x04site\x18\x01 \x01(\t\"\x90\x02\n\rTrackedPerson\x12\x10\n\x08track_id\x18\x01 \x01(\t\x12%\n\nposition_m\x18\x02 \x01(\x0b\x32\x11.fishloc.v1.Point\x12\'\n\x0cvelocity_mps\x18\x03 \x01(\x0b\x32\x11.fishloc.v1.Point\x12\x0f\n\x07\x63\x61meras\x18\x04 \x03(\t\x12\x12\n\nfirst_seen\x18\x05 \x01(\x01\x12\x11\n\tlast_seen\x18\x06 \x01(\x01\x12\x36\n\x07\x64well_s\x18\x07 \x03(\x0b\x32%.fishloc.v1.TrackedPerson.DwellSEntry\x1a-\n\x0b\x44wellSEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\x01:\x02\x38\x01\"\x1a\n\tZoneCount\x12\r\n\x05\x63ount\x18\x01 \x01(\x05\"0\n\tLineCount\x12\x10\n\x08in_count\x18\x01 \x01(\x03\x12\x11\n\tout_count\x18\x02 \x01(\x03\"\xe7\x02\n\rSiteOccupancy\x12\x0c\n\x04site\x18\x01 \x01(\t\x12\x11\n\x04time\x18\x02 \x01(\x01H\x00\x88\x01\x01\x12\r\n\x05\x63ount\x18\x03 \x01(\x05\x12)\n\x06people\x18\x04 \x03(\x0b\x32\x19.fishloc.v1.TrackedPerson\x12\x33\n\x05zones\x18\x05 \x03(\x0b\x32$.fishloc.v1.SiteOccupancy.ZonesEntry\x12\x33\n\x05lines\x18\x06 \x03(\x0b\x32$.fishloc.v1.SiteOccupancy.LinesEntry\x1a\x43\n\nZonesEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12$\n\x05value\x18\x02 \x01(\x0b\x32\x15.fishloc.v1.ZoneCount:\x02\x38\x01\x1a\x43\n\nLinesEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12$\n\x05value\x18\x02 \x01(\x0b\x32\x15.fishloc.v1.LineCount:\x02\x38\x01\x42\x07\n\x05_time2\xcb\x04\n\tLocalizer\x12?\n\x06\x44\x65tect\x12\x19.fishloc.v1.DetectRequest\x1a\x1a.fishloc.v1.DetectResponse\x12I\n\x0cStreamDetect\x12\x19.fishloc.v1.DetectRequest\x1a\x1a.fishloc.v1.DetectResponse(\x01\x30\x01\x12N\n\x0bListCameras\x12\x1e.fishloc.v1.ListCamerasRequest\x1a\x1f.fishloc.v1.ListCamerasResponse\x12=\n\tGetCamera\x12\x1c.fishloc.v1.GetCameraRequest\x1a\x12.fishloc.v1.Camera\x12H\n\tPutCamera\x12\x1c.fishloc.v1.PutCameraRequest\x1a\x1d.fishloc.v1.PutCameraResponse\x12Q\n\x0c\x44\x65leteCamera\x12\x1f.fishloc.v1.DeleteCameraRequest\x1a .fishloc.v1.DeleteCameraResponse\x12>\n\x08GetModel\x12\x1b.fishloc.v1.GetModelRequest\x1a\x15.fishloc.v1.ModelInfo\x12\x46\n\tWatchSite\x12\x1c.fishloc.v1.WatchSiteRequest\x1a\x19.fishloc.v1.SiteOccupancy0\x01\x62\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
 _builder.BuildTopDescriptorsAndMessages(DESCRIPTOR, 'protos.fishloc.v1.localizer_pb2', _globals)
 if not _descriptor._USE_C_DESCRIPTORS:
   DESCRIPTOR._loaded_options = None
+  _globals['_TRACKEDPERSON_DWELLSENTRY']._loaded_options = None
+  _globals['_TRACKEDPERSON_DWELLSENTRY']._serialized_options = b'8\001'
+  _globals['_SITEOCCUPANCY_ZONESENTRY']._loaded_options = None
+  _globals['_SITEOCCUPANCY_ZONESENTRY']._serialized_options = b'8\001'
+  _globals['_SITEOCCUPANCY_LINESENTRY']._loaded_options = None
+  _globals['_SITEOCCUPANCY_LINESENTRY']._serialized_options = b'8\001'
   _globals['_DETECTREQUEST']._serialized_start=83
   _globals['_DETECTREQUEST']._serialized_end=238
   _globals['_POINT']._serialized_start=240
@@ -39,41 +45,57 @@ if not _descriptor._USE_C_DESCRIPTORS:
   _globals['_BOX']._serialized_start=271
   _globals['_BOX']._serialized_end=341
   _globals['_DETECTION']._serialized_start=344
-  _globals['_DETECTION']._serialized_end=595
-  _globals['_IMAGESIZE']._serialized_start=597
-  _globals['_IMAGESIZE']._serialized_end=639
-  _globals['_MODELREF']._serialized_start=641
-  _globals['_MODELREF']._serialized_end=682
-  _globals['_TIMING']._serialized_start=684
-  _globals['_TIMING']._serialized_end=783
-  _globals['_DETECTRESPONSE']._serialized_start=786
-  _globals['_DETECTRESPONSE']._serialized_end=1206
-  _globals['_DETECTRESPONSE_STATUS']._serialized_start=1142
-  _globals['_DETECTRESPONSE_STATUS']._serialized_end=1206
-  _globals['_SITEPOSE']._serialized_start=1208
-  _globals['_SITEPOSE']._serialized_end=1261
-  _globals['_CAMERA']._serialized_start=1264
-  _globals['_CAMERA']._serialized_end=1603
-  _globals['_POLYGON']._serialized_start=1605
-  _globals['_POLYGON']._serialized_end=1649
-  _globals['_LISTCAMERASREQUEST']._serialized_start=1651
-  _globals['_LISTCAMERASREQUEST']._serialized_end=1671
-  _globals['_LISTCAMERASRESPONSE']._serialized_start=1673
-  _globals['_LISTCAMERASRESPONSE']._serialized_end=1731
-  _globals['_GETCAMERAREQUEST']._serialized_start=1733
-  _globals['_GETCAMERAREQUEST']._serialized_end=1770
-  _globals['_PUTCAMERAREQUEST']._serialized_start=1772
-  _globals['_PUTCAMERAREQUEST']._serialized_end=1826
-  _globals['_PUTCAMERARESPONSE']._serialized_start=1828
-  _globals['_PUTCAMERARESPONSE']._serialized_end=1900
-  _globals['_DELETECAMERAREQUEST']._serialized_start=1902
-  _globals['_DELETECAMERAREQUEST']._serialized_end=1942
-  _globals['_DELETECAMERARESPONSE']._serialized_start=1944
-  _globals['_DELETECAMERARESPONSE']._serialized_end=1966
-  _globals['_GETMODELREQUEST']._serialized_start=1968
-  _globals['_GETMODELREQUEST']._serialized_end=1985
-  _globals['_MODELINFO']._serialized_start=1988
-  _globals['_MODELINFO']._serialized_end=2152
-  _globals['_LOCALIZER']._serialized_start=2155
-  _globals['_LOCALIZER']._serialized_end=2670
+  _globals['_DETECTION']._serialized_end=631
+  _globals['_IMAGESIZE']._serialized_start=633
+  _globals['_IMAGESIZE']._serialized_end=675
+  _globals['_MODELREF']._serialized_start=677
+  _globals['_MODELREF']._serialized_end=718
+  _globals['_TIMING']._serialized_start=720
+  _globals['_TIMING']._serialized_end=819
+  _globals['_DETECTRESPONSE']._serialized_start=822
+  _globals['_DETECTRESPONSE']._serialized_end=1242
+  _globals['_DETECTRESPONSE_STATUS']._serialized_start=1178
+  _globals['_DETECTRESPONSE_STATUS']._serialized_end=1242
+  _globals['_SITEPOSE']._serialized_start=1244
+  _globals['_SITEPOSE']._serialized_end=1297
+  _globals['_CAMERA']._serialized_start=1300
+  _globals['_CAMERA']._serialized_end=1667
+  _globals['_POLYGON']._serialized_start=1669
+  _globals['_POLYGON']._serialized_end=1713
+  _globals['_LISTCAMERASREQUEST']._serialized_start=1715
+  _globals['_LISTCAMERASREQUEST']._serialized_end=1735
+  _globals['_LISTCAMERASRESPONSE']._serialized_start=1737
+  _globals['_LISTCAMERASRESPONSE']._serialized_end=1795
+  _globals['_GETCAMERAREQUEST']._serialized_start=1797
+  _globals['_GETCAMERAREQUEST']._serialized_end=1834
+  _globals['_PUTCAMERAREQUEST']._serialized_start=1836
+  _globals['_PUTCAMERAREQUEST']._serialized_end=1890
+  _globals['_PUTCAMERARESPONSE']._serialized_start=1892
+  _globals['_PUTCAMERARESPONSE']._serialized_end=1964
+  _globals['_DELETECAMERAREQUEST']._serialized_start=1966
+  _globals['_DELETECAMERAREQUEST']._serialized_end=2006
+  _globals['_DELETECAMERARESPONSE']._serialized_start=2008
+  _globals['_DELETECAMERARESPONSE']._serialized_end=2030
+  _globals['_GETMODELREQUEST']._serialized_start=2032
+  _globals['_GETMODELREQUEST']._serialized_end=2049
+  _globals['_MODELINFO']._serialized_start=2052
+  _globals['_MODELINFO']._serialized_end=2216
+  _globals['_WATCHSITEREQUEST']._serialized_start=2218
+  _globals['_WATCHSITEREQUEST']._serialized_end=2250
+  _globals['_TRACKEDPERSON']._serialized_start=2253
+  _globals['_TRACKEDPERSON']._serialized_end=2525
+  _globals['_TRACKEDPERSON_DWELLSENTRY']._serialized_start=2480
+  _globals['_TRACKEDPERSON_DWELLSENTRY']._serialized_end=2525
+  _globals['_ZONECOUNT']._serialized_start=2527
+  _globals['_ZONECOUNT']._serialized_end=2553
+  _globals['_LINECOUNT']._serialized_start=2555
+  _globals['_LINECOUNT']._serialized_end=2603
+  _globals['_SITEOCCUPANCY']._serialized_start=2606
+  _globals['_SITEOCCUPANCY']._serialized_end=2965
+  _globals['_SITEOCCUPANCY_ZONESENTRY']._serialized_start=2820
+  _globals['_SITEOCCUPANCY_ZONESENTRY']._serialized_end=2887
+  _globals['_SITEOCCUPANCY_LINESENTRY']._serialized_start=2889
+  _globals['_SITEOCCUPANCY_LINESENTRY']._serialized_end=2956
+  _globals['_LOCALIZER']._serialized_start=2968
+  _globals['_LOCALIZER']._serialized_end=3555
 # @@protoc_insertion_point(module_scope)

@@ -47,7 +47,7 @@ class Box(_message.Message):
     def __init__(self, cx: _Optional[float] = ..., cy: _Optional[float] = ..., w: _Optional[float] = ..., h: _Optional[float] = ..., angle_deg: _Optional[float] = ...) -> None: ...
 
 class Detection(_message.Message):
-    __slots__ = ("score", "box", "corners", "foot_px", "position_m", "distance_m", "site_position_m")
+    __slots__ = ("score", "box", "corners", "foot_px", "position_m", "distance_m", "site_position_m", "track_id")
     SCORE_FIELD_NUMBER: _ClassVar[int]
     BOX_FIELD_NUMBER: _ClassVar[int]
     CORNERS_FIELD_NUMBER: _ClassVar[int]
@@ -55,6 +55,7 @@ class Detection(_message.Message):
     POSITION_M_FIELD_NUMBER: _ClassVar[int]
     DISTANCE_M_FIELD_NUMBER: _ClassVar[int]
     SITE_POSITION_M_FIELD_NUMBER: _ClassVar[int]
+    TRACK_ID_FIELD_NUMBER: _ClassVar[int]
     score: float
     box: Box
     corners: _containers.RepeatedCompositeFieldContainer[Point]
@@ -62,7 +63,8 @@ class Detection(_message.Message):
     position_m: Point
     distance_m: float
     site_position_m: Point
-    def __init__(self, score: _Optional[float] = ..., box: _Optional[_Union[Box, _Mapping]] = ..., corners: _Optional[_Iterable[_Union[Point, _Mapping]]] = ..., foot_px: _Optional[_Union[Point, _Mapping]] = ..., position_m: _Optional[_Union[Point, _Mapping]] = ..., distance_m: _Optional[float] = ..., site_position_m: _Optional[_Union[Point, _Mapping]] = ...) -> None: ...
+    track_id: str
+    def __init__(self, score: _Optional[float] = ..., box: _Optional[_Union[Box, _Mapping]] = ..., corners: _Optional[_Iterable[_Union[Point, _Mapping]]] = ..., foot_px: _Optional[_Union[Point, _Mapping]] = ..., position_m: _Optional[_Union[Point, _Mapping]] = ..., distance_m: _Optional[float] = ..., site_position_m: _Optional[_Union[Point, _Mapping]] = ..., track_id: _Optional[str] = ...) -> None: ...
 
 class ImageSize(_message.Message):
     __slots__ = ("width", "height")
@@ -139,7 +141,7 @@ class SitePose(_message.Message):
     def __init__(self, x_m: _Optional[float] = ..., y_m: _Optional[float] = ..., yaw_deg: _Optional[float] = ...) -> None: ...
 
 class Camera(_message.Message):
-    __slots__ = ("id", "altitude_m", "image_size", "principal_point", "focal_px", "kb", "max_theta_deg", "site_pose", "tilt_deg", "masks_px")
+    __slots__ = ("id", "altitude_m", "image_size", "principal_point", "focal_px", "kb", "max_theta_deg", "site_pose", "site", "tilt_deg", "masks_px")
     ID_FIELD_NUMBER: _ClassVar[int]
     ALTITUDE_M_FIELD_NUMBER: _ClassVar[int]
     IMAGE_SIZE_FIELD_NUMBER: _ClassVar[int]
@@ -148,6 +150,7 @@ class Camera(_message.Message):
     KB_FIELD_NUMBER: _ClassVar[int]
     MAX_THETA_DEG_FIELD_NUMBER: _ClassVar[int]
     SITE_POSE_FIELD_NUMBER: _ClassVar[int]
+    SITE_FIELD_NUMBER: _ClassVar[int]
     TILT_DEG_FIELD_NUMBER: _ClassVar[int]
     MASKS_PX_FIELD_NUMBER: _ClassVar[int]
     id: str
@@ -158,9 +161,10 @@ class Camera(_message.Message):
     kb: _containers.RepeatedScalarFieldContainer[float]
     max_theta_deg: float
     site_pose: SitePose
+    site: str
     tilt_deg: Point
     masks_px: _containers.RepeatedCompositeFieldContainer[Polygon]
-    def __init__(self, id: _Optional[str] = ..., altitude_m: _Optional[float] = ..., image_size: _Optional[_Union[ImageSize, _Mapping]] = ..., principal_point: _Optional[_Union[Point, _Mapping]] = ..., focal_px: _Optional[_Union[Point, _Mapping]] = ..., kb: _Optional[_Iterable[float]] = ..., max_theta_deg: _Optional[float] = ..., site_pose: _Optional[_Union[SitePose, _Mapping]] = ..., tilt_deg: _Optional[_Union[Point, _Mapping]] = ..., masks_px: _Optional[_Iterable[_Union[Polygon, _Mapping]]] = ...) -> None: ...
+    def __init__(self, id: _Optional[str] = ..., altitude_m: _Optional[float] = ..., image_size: _Optional[_Union[ImageSize, _Mapping]] = ..., principal_point: _Optional[_Union[Point, _Mapping]] = ..., focal_px: _Optional[_Union[Point, _Mapping]] = ..., kb: _Optional[_Iterable[float]] = ..., max_theta_deg: _Optional[float] = ..., site_pose: _Optional[_Union[SitePose, _Mapping]] = ..., site: _Optional[str] = ..., tilt_deg: _Optional[_Union[Point, _Mapping]] = ..., masks_px: _Optional[_Iterable[_Union[Polygon, _Mapping]]] = ...) -> None: ...
 
 class Polygon(_message.Message):
     __slots__ = ("points",)
@@ -231,3 +235,78 @@ class ModelInfo(_message.Message):
     pad_value: int
     sha256: str
     def __init__(self, name: _Optional[str] = ..., version: _Optional[str] = ..., input_size: _Optional[int] = ..., trained_on: _Optional[str] = ..., box_format: _Optional[str] = ..., default_min_score: _Optional[float] = ..., pad_value: _Optional[int] = ..., sha256: _Optional[str] = ...) -> None: ...
+
+class WatchSiteRequest(_message.Message):
+    __slots__ = ("site",)
+    SITE_FIELD_NUMBER: _ClassVar[int]
+    site: str
+    def __init__(self, site: _Optional[str] = ...) -> None: ...
+
+class TrackedPerson(_message.Message):
+    __slots__ = ("track_id", "position_m", "velocity_mps", "cameras", "first_seen", "last_seen", "dwell_s")
+    class DwellSEntry(_message.Message):
+        __slots__ = ("key", "value")
+        KEY_FIELD_NUMBER: _ClassVar[int]
+        VALUE_FIELD_NUMBER: _ClassVar[int]
+        key: str
+        value: float
+        def __init__(self, key: _Optional[str] = ..., value: _Optional[float] = ...) -> None: ...
+    TRACK_ID_FIELD_NUMBER: _ClassVar[int]
+    POSITION_M_FIELD_NUMBER: _ClassVar[int]
+    VELOCITY_MPS_FIELD_NUMBER: _ClassVar[int]
+    CAMERAS_FIELD_NUMBER: _ClassVar[int]
+    FIRST_SEEN_FIELD_NUMBER: _ClassVar[int]
+    LAST_SEEN_FIELD_NUMBER: _ClassVar[int]
+    DWELL_S_FIELD_NUMBER: _ClassVar[int]
+    track_id: str
+    position_m: Point
+    velocity_mps: Point
+    cameras: _containers.RepeatedScalarFieldContainer[str]
+    first_seen: float
+    last_seen: float
+    dwell_s: _containers.ScalarMap[str, float]
+    def __init__(self, track_id: _Optional[str] = ..., position_m: _Optional[_Union[Point, _Mapping]] = ..., velocity_mps: _Optional[_Union[Point, _Mapping]] = ..., cameras: _Optional[_Iterable[str]] = ..., first_seen: _Optional[float] = ..., last_seen: _Optional[float] = ..., dwell_s: _Optional[_Mapping[str, float]] = ...) -> None: ...
+
+class ZoneCount(_message.Message):
+    __slots__ = ("count",)
+    COUNT_FIELD_NUMBER: _ClassVar[int]
+    count: int
+    def __init__(self, count: _Optional[int] = ...) -> None: ...
+
+class LineCount(_message.Message):
+    __slots__ = ("in_count", "out_count")
+    IN_COUNT_FIELD_NUMBER: _ClassVar[int]
+    OUT_COUNT_FIELD_NUMBER: _ClassVar[int]
+    in_count: int
+    out_count: int
+    def __init__(self, in_count: _Optional[int] = ..., out_count: _Optional[int] = ...) -> None: ...
+
+class SiteOccupancy(_message.Message):
+    __slots__ = ("site", "time", "count", "people", "zones", "lines")
+    class ZonesEntry(_message.Message):
+        __slots__ = ("key", "value")
+        KEY_FIELD_NUMBER: _ClassVar[int]
+        VALUE_FIELD_NUMBER: _ClassVar[int]
+        key: str
+        value: ZoneCount
+        def __init__(self, key: _Optional[str] = ..., value: _Optional[_Union[ZoneCount, _Mapping]] = ...) -> None: ...
+    class LinesEntry(_message.Message):
+        __slots__ = ("key", "value")
+        KEY_FIELD_NUMBER: _ClassVar[int]
+        VALUE_FIELD_NUMBER: _ClassVar[int]
+        key: str
+        value: LineCount
+        def __init__(self, key: _Optional[str] = ..., value: _Optional[_Union[LineCount, _Mapping]] = ...) -> None: ...
+    SITE_FIELD_NUMBER: _ClassVar[int]
+    TIME_FIELD_NUMBER: _ClassVar[int]
+    COUNT_FIELD_NUMBER: _ClassVar[int]
+    PEOPLE_FIELD_NUMBER: _ClassVar[int]
+    ZONES_FIELD_NUMBER: _ClassVar[int]
+    LINES_FIELD_NUMBER: _ClassVar[int]
+    site: str
+    time: float
+    count: int
+    people: _containers.RepeatedCompositeFieldContainer[TrackedPerson]
+    zones: _containers.MessageMap[str, ZoneCount]
+    lines: _containers.MessageMap[str, LineCount]
+    def __init__(self, site: _Optional[str] = ..., time: _Optional[float] = ..., count: _Optional[int] = ..., people: _Optional[_Iterable[_Union[TrackedPerson, _Mapping]]] = ..., zones: _Optional[_Mapping[str, ZoneCount]] = ..., lines: _Optional[_Mapping[str, LineCount]] = ...) -> None: ...

@@ -69,6 +69,11 @@ class LocalizerStub:
                 request_serializer=protos_dot_fishloc_dot_v1_dot_localizer__pb2.GetModelRequest.SerializeToString,
                 response_deserializer=protos_dot_fishloc_dot_v1_dot_localizer__pb2.ModelInfo.FromString,
                 _registered_method=True)
+        self.WatchSite = channel.unary_stream(
+                '/fishloc.v1.Localizer/WatchSite',
+                request_serializer=protos_dot_fishloc_dot_v1_dot_localizer__pb2.WatchSiteRequest.SerializeToString,
+                response_deserializer=protos_dot_fishloc_dot_v1_dot_localizer__pb2.SiteOccupancy.FromString,
+                _registered_method=True)
 
 
 class LocalizerServicer:
@@ -138,6 +143,17 @@ class LocalizerServicer:
         context.set_details('Method not implemented!')
         raise NotImplementedError('Method not implemented!')
 
+    def WatchSite(self, request, context):
+        """The fused, tracked people of a site: its occupancy now, then after every frame of its cameras
+        (the REST occupancy answer and SSE events). A client that reads slowly misses updates (its
+        queue keeps the newest 16); it never slows detection. NOT_FOUND when no camera names the site,
+        UNAUTHENTICATED without the read token when the server has one; the stream ends (OK) when the
+        site's last camera leaves it or the server stops.
+        """
+        context.set_code(grpc.StatusCode.UNIMPLEMENTED)
+        context.set_details('Method not implemented!')
+        raise NotImplementedError('Method not implemented!')
+
 
 def add_LocalizerServicer_to_server(servicer, server):
     rpc_method_handlers = {
@@ -175,6 +191,11 @@ def add_LocalizerServicer_to_server(servicer, server):
                     servicer.GetModel,
                     request_deserializer=protos_dot_fishloc_dot_v1_dot_localizer__pb2.GetModelRequest.FromString,
                     response_serializer=protos_dot_fishloc_dot_v1_dot_localizer__pb2.ModelInfo.SerializeToString,
+            ),
+            'WatchSite': grpc.unary_stream_rpc_method_handler(
+                    servicer.WatchSite,
+                    request_deserializer=protos_dot_fishloc_dot_v1_dot_localizer__pb2.WatchSiteRequest.FromString,
+                    response_serializer=protos_dot_fishloc_dot_v1_dot_localizer__pb2.SiteOccupancy.SerializeToString,
             ),
     }
     generic_handler = grpc.method_handlers_generic_handler(
@@ -366,6 +387,33 @@ class Localizer:
             '/fishloc.v1.Localizer/GetModel',
             protos_dot_fishloc_dot_v1_dot_localizer__pb2.GetModelRequest.SerializeToString,
             protos_dot_fishloc_dot_v1_dot_localizer__pb2.ModelInfo.FromString,
+            options,
+            channel_credentials,
+            insecure,
+            call_credentials,
+            compression,
+            wait_for_ready,
+            timeout,
+            metadata,
+            _registered_method=True)
+
+    @staticmethod
+    def WatchSite(request,
+            target,
+            options=(),
+            channel_credentials=None,
+            call_credentials=None,
+            insecure=False,
+            compression=None,
+            wait_for_ready=None,
+            timeout=None,
+            metadata=None):
+        return grpc.experimental.unary_stream(
+            request,
+            target,
+            '/fishloc.v1.Localizer/WatchSite',
+            protos_dot_fishloc_dot_v1_dot_localizer__pb2.WatchSiteRequest.SerializeToString,
+            protos_dot_fishloc_dot_v1_dot_localizer__pb2.SiteOccupancy.FromString,
             options,
             channel_credentials,
             insecure,

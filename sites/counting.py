@@ -1,0 +1,86 @@
+"""Zone and line figures of a site: people per zone now, dwell per track and zone, line crossings.
+
+Tracks report their moves (where they were before an update and where they are after it); a move
+that crosses a counting line counts `in` or `out` (the sign convention of `sites.layout`), and the
+time between two updates inside a zone adds to the track's dwell there.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sites.layout import SiteLayout, side_of
+from sites.track import Track
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass
+class LineTally:
+    """`in` and `out` crossings of one line."""
+
+    crossed_in: int = 0
+    crossed_out: int = 0
+
+    def to_dict(self) -> dict[str, int]:
+        return {"in": self.crossed_in, "out": self.crossed_out}
+
+
+@dataclass
+class SiteCounts:
+    """Crossing tallies per line of the layout (kept across layout changes for lines that stay)."""
+
+    lines: dict[str, LineTally] = field(default_factory=dict)
+
+    def follow(self, layout: SiteLayout) -> None:
+        """Keep tallies of the layout's lines only; new lines start at zero."""
+        self.lines = {line_id: self.lines.get(line_id, LineTally()) for line_id in layout.lines}
+
+    def account(self, layout: SiteLayout, tracks: list[Track], before_m: FloatArray,
+                before_t: FloatArray, margin_m: float) -> None:
+        """Count the moves of `tracks` (confirmed, just updated) from `before_m` (M, 2) m at `before_t`
+        (M,) s to their current positions: crossings per line, dwell per zone.
+
+        A line counts a track when it is found on the other side, at least `margin_m` from the line,
+        of where it last stood that far out, and the way between crosses the segment: a person
+        standing on a door line, whose position jitters across it, counts once or not at all."""
+        if not tracks:
+            return
+        after_m = np.stack([track.last_position_m for track in tracks])
+        for line_id, line in layout.lines.items():
+            tally = self.lines.setdefault(line_id, LineTally())
+            length = float(np.hypot(*(line.to_m - line.from_m)))
+            distance = side_of(line.from_m, line.to_m, after_m) / length
+            distance_before = side_of(line.from_m, line.to_m, before_m) / length
+            for index in np.flatnonzero(np.abs(distance) >= margin_m):
+                track, side = tracks[index], int(np.sign(distance[index]))
+                first = (int(np.sign(distance_before[index])), before_m[index])
+                if abs(distance_before[index]) < margin_m:
+                    first = (side, after_m[index])
+                anchor = track.line_anchors.get(line_id, first)
+                track.line_anchors[line_id] = (side, after_m[index])
+                if anchor[0] == side:
+                    continue
+                sign = int(line.crossings(anchor[1][None, :], after_m[index][None, :])[0])
+                tally.crossed_in += sign > 0
+                tally.crossed_out += sign < 0
+        for zone_id, zone in layout.zones.items():
+            was_inside = zone.contains_xy(before_m)
+            is_inside = zone.contains_xy(after_m)
+            for index in np.flatnonzero(was_inside & is_inside):
+                track = tracks[index]
+                elapsed = track.last_seen - float(before_t[index])
+                track.dwell_s[zone_id] = track.dwell_s.get(zone_id, 0.0) + max(elapsed, 0.0)
+            for index in np.flatnonzero(is_inside & ~was_inside):
+                tracks[index].dwell_s.setdefault(zone_id, 0.0)
+
+    def copy(self) -> SiteCounts:
+        return SiteCounts({k: LineTally(v.crossed_in, v.crossed_out) for k, v in self.lines.items()})
+
+
+def zone_counts(layout: SiteLayout, positions_m: FloatArray) -> dict[str, int]:
+    """People per zone for positions (N, 2) m."""
+    return {zone_id: int(zone.contains_xy(positions_m).sum()) for zone_id, zone in layout.zones.items()}
