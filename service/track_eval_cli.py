@@ -16,7 +16,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from service.sequence_data import SequenceFormatError, read_sequence
+from service.sequence_data import Sequence, SequenceFormatError, read_sequence
 from service.track_playback import (
     LocalServer,
     PlaybackError,
@@ -24,7 +24,7 @@ from service.track_playback import (
     play_ground_truth,
     play_through_server,
 )
-from service.track_scoring import GATE_M, score_sequence
+from service.track_scoring import GATE_M, Reported, score_sequence
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -44,6 +44,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--token", help="the server's API token (camera, zone and line writes; it passes "
                                         "site reads too)")
     parser.add_argument("--threads", type=int, help="with --model: inference threads")
+    parser.add_argument("--min-score", type=float,
+                        help="with --server or --model: detections kept (default: the model's threshold)")
     parser.add_argument("--gate-m", type=float, default=GATE_M, help="match distance in the floor plane")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -58,9 +60,18 @@ def _summary(figures: dict[str, Any]) -> str:
             f"{num(figures['zone_count_mae'], 2)}  worst line error {num(figures['line_error_max'])}")
 
 
+def _play(url: str, token: str | None, sequence: Sequence, bar: tqdm, min_score: float | None) -> Reported:
+    client = ServerClient(url, token)
+    try:
+        return play_through_server(client, sequence, lambda: bar.update(1), min_score)
+    finally:
+        client.close()
+
+
 def run(args: argparse.Namespace) -> int:
-    if args.noise_m < 0 or args.gate_m <= 0:
-        print("fishloc eval: --noise-m must be >= 0 and --gate-m > 0", file=sys.stderr)
+    if args.noise_m < 0 or args.gate_m <= 0 or not 0 <= (args.min_score or 0) <= 1:
+        print("fishloc eval: --noise-m must be >= 0, --gate-m > 0, --min-score within [0, 1]",
+              file=sys.stderr)
         return 2
     try:
         import motmetrics  # noqa: F401  (scoring needs it; say so before playing for minutes)
@@ -80,19 +91,11 @@ def run(args: argparse.Namespace) -> int:
                 reported = play_ground_truth(sequence, args.noise_m, on_step=lambda: bar.update(1))
             elif args.server:
                 mode = "server"
-                client = ServerClient(args.server, args.token)
-                try:
-                    reported = play_through_server(client, sequence, on_step=lambda: bar.update(1))
-                finally:
-                    client.close()
+                reported = _play(args.server, args.token, sequence, bar, args.min_score)
             else:
                 mode = "model"
                 with LocalServer(args.model, args.threads) as server:
-                    client = ServerClient(server.url)
-                    try:
-                        reported = play_through_server(client, sequence, on_step=lambda: bar.update(1))
-                    finally:
-                        client.close()
+                    reported = _play(server.url, None, sequence, bar, args.min_score)
         except (PlaybackError, OSError) as error:
             print(f"fishloc eval: {error}", file=sys.stderr)
             return 1
@@ -101,6 +104,7 @@ def run(args: argparse.Namespace) -> int:
     document = {"data": str(args.data), "mode": mode, "site": sequence.site_id, "steps": len(sequence.steps),
                 "frames": frames, "cameras": [c["id"] for c in sequence.cameras],
                 "noise_m": args.noise_m if args.ground_truth_detections else None,
+                "min_score": None if args.ground_truth_detections else args.min_score,
                 "seconds": round(time.perf_counter() - started, 1), **figures}
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(document, indent=1) + "\n", encoding="utf-8")

@@ -94,9 +94,10 @@ def install(client: ServerClient, sequence: Sequence) -> None:
         client.put_json(f"{site}/lines/{_quoted(name)}", body)
 
 
-def play_through_server(client: ServerClient, sequence: Sequence,
-                        on_step: Callable[[], None] | None = None) -> Reported:
-    """Install the sequence, post its frames step by step, read the occupancy after each step."""
+def play_through_server(client: ServerClient, sequence: Sequence, on_step: Callable[[], None] | None = None,
+                        min_score: float | None = None) -> Reported:
+    """Install the sequence, post its frames step by step (with `min_score`, else the model's
+    threshold), read the occupancy after each step."""
     install(client, sequence)
     occupancy_path = f"/v1/sites/{_quoted(sequence.site_id)}/occupancy"
     reported = Reported()
@@ -105,7 +106,10 @@ def play_through_server(client: ServerClient, sequence: Sequence,
                              for name, v in (before.get("lines") or {}).items()}
     for index, step in enumerate(sequence.steps):
         for frame in step.frames:
-            query = urllib.parse.urlencode({"capture_time": repr(step.capture_time), "frame_id": str(index)})
+            parameters = {"capture_time": repr(step.capture_time), "frame_id": str(index)}
+            if min_score is not None:
+                parameters["min_score"] = repr(min_score)
+            query = urllib.parse.urlencode(parameters)
             _, answer = client.request("POST", f"/v1/cameras/{_quoted(frame.camera_id)}/detect?{query}",
                                        frame.path.read_bytes(), "image/jpeg")
             reported.detections.append((index, frame.camera_id, [

@@ -88,6 +88,13 @@ def test_the_command_against_a_server_and_in_process_agree(sequence_file: Path, 
     detections = a["detections"]
     assert detections == b["detections"] and detections["frames"] == 2 * STEPS
     assert detections["recall"] > 0.5 and detections["camera_spread_m"]["p50"] < 0.75
+    # A threshold no score reaches: nobody detected, nobody reported.
+    strict = tmp_path / "strict.json"
+    assert main(["eval", "--tracks", "--data", str(sequence_file), "--server", server.url,
+                 "--min-score", "1", "--json", str(strict), "--quiet"]) == 0
+    figures = _figures(strict)
+    assert figures["min_score"] == 1.0
+    assert (figures["detections"]["recall"], figures["reported_people_steps"]) == (0, 0)
 
 
 def test_bad_arguments_and_files_are_refused(sequence_file: Path, tmp_path: Path) -> None:
@@ -98,6 +105,8 @@ def test_bad_arguments_and_files_are_refused(sequence_file: Path, tmp_path: Path
                  "--json", out]) == 2
     assert main(["eval", "--tracks", "--data", str(sequence_file), "--ground-truth-detections",
                  "--noise-m", "-1", "--json", out]) == 2
+    assert main(["eval", "--tracks", "--data", str(sequence_file), "--server", "http://127.0.0.1:1",
+                 "--min-score", "2", "--json", out]) == 2
     with pytest.raises(SystemExit):  # --server, --model and --ground-truth-detections exclude each other
         main(["eval", "--tracks", "--data", str(sequence_file), "--server", "http://127.0.0.1:1",
               "--ground-truth-detections", "--json", out])
