@@ -36,7 +36,7 @@ def test_release_checkpoint_matches_the_shipped_onnx() -> None:
     shipped = OnnxModel(DEFAULT_MODEL_PATH, SessionThreads(1))
     checkpoint = load_checkpoint(RELEASE)
     assert dataclasses.replace(shipped.info, sha256="") == contract_info(checkpoint)
-    assert shipped.info.view == "polar" and shipped.info.version == "0.2.0"
+    assert shipped.info.view == "polar" and shipped.info.version == "0.3.0" and shipped.has_foot
     assert "Apache-2.0" in shipped.info.licence
     module, _ = contract_model(checkpoint)
     strips = _sample_strips(shipped)
@@ -56,3 +56,5 @@ def test_export_of_the_release_checkpoint_reproduces_the_shipped_onnx(tmp_path: 
         np.testing.assert_allclose(ours.scores, theirs.scores, atol=1e-5)
         top = theirs.scores >= 0.05
         np.testing.assert_allclose(ours.boxes[top], theirs.boxes[top], atol=1e-2)
+        assert ours.foot is not None and theirs.foot is not None
+        np.testing.assert_allclose(ours.foot[top], theirs.foot[top], atol=1e-2)
