@@ -65,12 +65,15 @@ class SiteCounts:
             length = float(np.hypot(*(line.to_m - line.from_m)))
             distance = side_of(line.from_m, line.to_m, after_m) / length
             distance_before = side_of(line.from_m, line.to_m, before_m) / length
+            # A track's first anchor is where it stood clear of the line first, even when its next
+            # position falls within the margin (a track started just before the line).
+            for index in np.flatnonzero(np.abs(distance_before) >= margin_m):
+                if line_id not in tracks[index].line_anchors:
+                    tracks[index].line_anchors[line_id] = (int(np.sign(distance_before[index])),
+                                                           before_m[index])
             for index in np.flatnonzero(np.abs(distance) >= margin_m):
                 track, side = tracks[index], int(np.sign(distance[index]))
-                first = (int(np.sign(distance_before[index])), before_m[index])
-                if abs(distance_before[index]) < margin_m:
-                    first = (side, after_m[index])
-                anchor = track.line_anchors.get(line_id, first)
+                anchor = track.line_anchors.get(line_id, (side, after_m[index]))
                 track.line_anchors[line_id] = (side, after_m[index])
                 if anchor[0] == side:
                     continue
