@@ -51,8 +51,9 @@ class SiteCounts:
 
     def account(self, layout: SiteLayout, tracks: list[Track], before_m: FloatArray,
                 before_t: FloatArray, margin_m: float) -> None:
-        """Count the moves of `tracks` (just updated; a tentative one's crossings wait on it) from `before_m` (M, 2) m at `before_t`
-        (M,) s to their current positions: crossings per line, dwell per zone.
+        """Count the moves of `tracks` (just updated; a tentative one's crossings wait on it) from
+        `before_m` (M, 2) m at `before_t` (M,) s to their current positions: crossings per line, dwell
+        per zone.
 
         A line counts a track when it is found on the other side, at least `margin_m` from the line,
         of where it last stood that far out, and the way between crosses the segment: a person

@@ -139,8 +139,8 @@ class FusionState:
         if len(rows) == 0:
             return joined
         kept_for = merge_on_floor(observation.positions_m[rows], observation.distance_m[rows],
-                                  observation.scores[rows], config.floor_merge_base_m, config.floor_merge_per_m,
-                                  config.high_score)
+                                  observation.scores[rows], config.floor_merge_base_m,
+                                  config.floor_merge_per_m, config.high_score)
         merged_rows, stands_for = rows, rows[kept_for]  # each row and the row kept for it
         rows = rows[np.unique(kept_for)]
         z_m = observation.positions_m[rows]
@@ -153,7 +153,7 @@ class FusionState:
         moved: list[Track] = []
         before_m: list[FloatArray] = []
         before_t: list[float] = []
-        taken = set()
+        taken: set[int] = set()
         for ti, di in pairs:
             track = self.tracks[ti]
             # The move counted is from where the track was last seen, not from its prediction.
@@ -166,7 +166,7 @@ class FusionState:
             taken.add(di)
         self.counts.account(self.layout, moved, np.array(before_m).reshape(-1, 2), np.array(before_t),
                             config.line_margin_m)
-        for di in np.flatnonzero(high):
+        for di in np.flatnonzero(high).tolist():
             if di in taken or self._seen_by_another(z_m[di], t, observation.camera_id):
                 continue
             track = Track.start(z_m[di], float(noise[di]), config.speed_var, t, observation.camera_id)
@@ -186,7 +186,8 @@ class FusionState:
         costs = self._costs([self.tracks[i] for i in track_index], z_m[det_index], noise_m2[det_index])
         ti, di = linear_sum_assignment(costs)
         matched = costs[ti, di] < _UNASSIGNABLE
-        return [(int(track_index[a]), int(det_index[b])) for a, b in zip(ti[matched], di[matched], strict=True)]
+        return [(int(track_index[a]), int(det_index[b]))
+                for a, b in zip(ti[matched], di[matched], strict=True)]
 
     def _confirm_if_due(self, track: Track) -> None:
         """Confirm a track seen often enough: it gets its number, and the line crossings of its
