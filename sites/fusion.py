@@ -8,6 +8,11 @@ tracks unseen for too long. Overlapping views merge because the second camera's 
 instant meets tracks the first camera's frame has just updated: a person seen by two cameras feeds
 one track twice, and the gate accounts for each position's uncertainty, which grows with the
 distance from the camera's nadir (`sigma_base_m + sigma_per_m · distance`).
+
+A real detector's frame is cleaned up first: its detections of one person are merged on the floor
+(`sites.floor_merge`), and only confident ones (`high_score`) may start a track, weaker ones only
+extend a confirmed one (ByteTrack's two stages). A line crossing made while a track is tentative
+waits on it and counts when it is confirmed.
 """
 
 from __future__ import annotations
