@@ -2,7 +2,9 @@
 
 Tracks report their moves (where they were before an update and where they are after it); a move
 that crosses a counting line counts `in` or `out` (the sign convention of `sites.layout`), and the
-time between two updates inside a zone adds to the track's dwell there.
+time between two updates inside a zone adds to the track's dwell there. A tentative track's crossings
+wait on it (`Track.pending_crossings`) and count when it is confirmed: a person who walks through a
+door before the tracker is sure of them is counted once confirmed, noise that never is, never.
 """
 
 from __future__ import annotations
@@ -39,10 +41,19 @@ class SiteCounts:
         """Keep tallies of the layout's lines only; new lines start at zero."""
         self.lines = {line_id: self.lines.get(line_id, LineTally()) for line_id in layout.lines}
 
+    def count_pending(self, track: Track) -> None:
+        """Count the crossings a just-confirmed track made while tentative."""
+        for line_id, sign in track.pending_crossings:
+            if line_id in self.lines:
+                self.lines[line_id].crossed_in += sign > 0
+                self.lines[line_id].crossed_out += sign < 0
+        track.pending_crossings = []
+
     def account(self, layout: SiteLayout, tracks: list[Track], before_m: FloatArray,
                 before_t: FloatArray, margin_m: float) -> None:
-        """Count the moves of `tracks` (confirmed, just updated) from `before_m` (M, 2) m at `before_t`
-        (M,) s to their current positions: crossings per line, dwell per zone.
+        """Count the moves of `tracks` (just updated; a tentative one's crossings wait on it) from
+        `before_m` (M, 2) m at `before_t` (M,) s to their current positions: crossings per line, dwell
+        per zone.
 
         A line counts a track when it is found on the other side, at least `margin_m` from the line,
         of where it last stood that far out, and the way between crosses the segment: a person
@@ -55,16 +66,23 @@ class SiteCounts:
             length = float(np.hypot(*(line.to_m - line.from_m)))
             distance = side_of(line.from_m, line.to_m, after_m) / length
             distance_before = side_of(line.from_m, line.to_m, before_m) / length
+            # A track's first anchor is where it stood clear of the line first, even when its next
+            # position falls within the margin (a track started just before the line).
+            for index in np.flatnonzero(np.abs(distance_before) >= margin_m):
+                if line_id not in tracks[index].line_anchors:
+                    tracks[index].line_anchors[line_id] = (int(np.sign(distance_before[index])),
+                                                           before_m[index])
             for index in np.flatnonzero(np.abs(distance) >= margin_m):
                 track, side = tracks[index], int(np.sign(distance[index]))
-                first = (int(np.sign(distance_before[index])), before_m[index])
-                if abs(distance_before[index]) < margin_m:
-                    first = (side, after_m[index])
-                anchor = track.line_anchors.get(line_id, first)
+                anchor = track.line_anchors.get(line_id, (side, after_m[index]))
                 track.line_anchors[line_id] = (side, after_m[index])
                 if anchor[0] == side:
                     continue
                 sign = int(line.crossings(anchor[1][None, :], after_m[index][None, :])[0])
+                if not track.confirmed:
+                    if sign:
+                        track.pending_crossings.append((line_id, sign))
+                    continue
                 tally.crossed_in += sign > 0
                 tally.crossed_out += sign < 0
         for zone_id, zone in layout.zones.items():

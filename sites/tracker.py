@@ -146,7 +146,10 @@ class SiteTracker:
         people = []
         positions = []
         for track in sorted(self._state.tracks, key=lambda tr: tr.number or 0):
-            if track.number is None:
+            # A confirmed track coasting longer than `report_coast_s` is kept alive to re-join its
+            # person, but no longer reported: they have most likely left.
+            unseen_s = 0.0 if now is None else now - track.last_seen
+            if track.number is None or unseen_s > self.config.report_coast_s:
                 continue
             ahead = 0.0 if at is None or now is None else at - now
             position = track.position_m + ahead * track.velocity_mps
