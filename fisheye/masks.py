@@ -18,6 +18,7 @@ from fisheye.arrays import as_points
 FloatArray = NDArray[np.float64]
 
 MAX_MASKS = 64
+MAX_CORNER_PX = 1e6  # |u|, |v| of a mask corner
 MAX_MASK_CORNERS = 256
 _MIN_AREA_PX2 = 1.0  # a mask thinner than a pixel masks nothing a detector could place a foot in
 
@@ -62,6 +63,9 @@ def polygon_problem(polygon_px: ArrayLike) -> str | None:
         return f"a polygon may have at most {MAX_MASK_CORNERS} corners, got {count}"
     if not np.isfinite(points).all():
         return "corners must be finite numbers"
+    if np.abs(points).max() > MAX_CORNER_PX:
+        # Before any products of coordinates: a corner this far out lies in no frame anyway.
+        return f"corners must lie within ±{MAX_CORNER_PX:g} px"
     following = np.roll(points, -1, axis=0)
     repeated = np.flatnonzero((points == following).all(axis=1))
     if repeated.size:

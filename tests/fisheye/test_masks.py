@@ -60,6 +60,8 @@ def test_a_convex_polygon_agrees_with_opencv(u: float, v: float) -> None:
         ([[0.0, 0.0], [20.0, 0.0], [20.0, 20.0], [0.0, 20.0], [10.0, 0.0], [5.0, -5.0]], "intersects itself"),
         ([[0.0, 0.0], [20.0, 0.0], [10.0, 0.0], [10.0, 10.0]], "intersects itself"),  # doubles back
         ([[0.0, 0.0], [np.inf, 0.0], [0.0, 10.0]], "finite"),
+        # found by the OpenAPI fuzz test: corners whose products overflow float64
+        ([[1.8e136, 7.1e15], [1.2e293, -2e16], [4.4e16, 2e-308], [-1.5e305, -4.7e15]], "within ±1e+06 px"),
     ],
 )
 def test_bad_polygons_are_named(polygon: list[list[float]], message: str) -> None:
