@@ -212,13 +212,12 @@ def placement_points(frame: EvalFrame, det_index: NDArray[np.int64], placement: 
     return foot_points(boxes, frame.principal_point).reshape(-1, 2)
 
 
-def _localisation_errors(frame: EvalFrame, match: FrameMatch, placement: str
-                         ) -> tuple[FloatArray, FloatArray]:
-    """(M,) errors m and (M,) GT distances m of the IoU-0.5 matches with known positions, placed
-    by `placement`; a match without a floor point by any placement is left out of every one."""
+def _localisation_errors(frame: EvalFrame, match: FrameMatch) -> tuple[dict[str, FloatArray], FloatArray]:
+    """Errors (M,) m by each placement and GT distances (M,) m of the IoU-0.5 matches with known
+    positions; a match without a floor point by any placement is left out of every one."""
     camera = frame.floor_camera
     if camera is None:
-        return np.zeros(0), np.zeros(0)
+        return {p: np.zeros(0) for p in PLACEMENT_SUFFIX}, np.zeros(0)
     matched = greedy_match(match.iou, 0.5)
     det_index = match.order[matched >= 0]
     gt_index = matched[matched >= 0]
@@ -226,7 +225,17 @@ def _localisation_errors(frame: EvalFrame, match: FrameMatch, placement: str
     errors = {p: np.linalg.norm(camera.pixels_to_floor(placement_points(frame, det_index, p)) - truth, axis=1)
               for p in PLACEMENT_SUFFIX}
     valid = np.all(np.isfinite(np.stack(list(errors.values()))), axis=0)
-    return errors[placement][valid], frame.gt_distances_m[gt_index][valid]
+    return {p: e[valid] for p, e in errors.items()}, frame.gt_distances_m[gt_index][valid]
+
+
+def _localisation(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch]
+                  ) -> tuple[FloatArray, dict[str, FloatArray]]:
+    """GT distance (M,) of every IoU-0.5 match with a floor point over the frames, and its error
+    (M,) m by each placement."""
+    pairs = [_localisation_errors(f, m) for f, m in zip(frames, prepared, strict=True)]
+    distances = np.concatenate([d for _, d in pairs]) if pairs else np.zeros(0)
+    return distances, {p: np.concatenate([e[p] for e, _ in pairs]) if pairs else np.zeros(0)
+                       for p in PLACEMENT_SUFFIX}
 
 
 def _mean(values: FloatArray) -> float:
@@ -291,10 +300,9 @@ def compute_metrics(frames: Sequence[EvalFrame], min_score: float) -> dict[str, 
     result: dict[str, float] = _ap_summary(frames, prepared)
     for name, distance_range in DISTANCE_BINS_M.items():
         result[f"AP_{name}"] = _ap_at(frames, prepared, 0.5, distance_range)
+    distances, by_placement = _localisation(frames, prepared)
     for placement, suffix in PLACEMENT_SUFFIX.items():
-        pairs = [_localisation_errors(f, m, placement) for f, m in zip(frames, prepared, strict=True)]
-        errors = np.concatenate([p[0] for p in pairs]) if pairs else np.zeros(0)
-        distances = np.concatenate([p[1] for p in pairs]) if pairs else np.zeros(0)
+        errors = by_placement[placement]
         result[f"mPE{suffix}"] = _mean(errors)
         for name, (low, high) in DISTANCE_BINS_M.items():
             result[f"PE_{name}{suffix}"] = _mean(errors[(distances >= low) & (distances < high)])
@@ -315,14 +323,4 @@ def compute_metrics(frames: Sequence[EvalFrame], min_score: float) -> dict[str, 
 def localisation_points(frames: Sequence[EvalFrame]) -> tuple[FloatArray, dict[str, FloatArray]]:
     """GT distance (M,) of every IoU-0.5 match with a floor point, and its error (M,) m by each
     placement (FOOT, BOX_SIDE, CENTRE)."""
-    distances: list[FloatArray] = []
-    errors: dict[str, list[FloatArray]] = {p: [] for p in PLACEMENT_SUFFIX}
-    for frame in frames:
-        match = _prepare(frame)
-        for placement in PLACEMENT_SUFFIX:
-            error, distance = _localisation_errors(frame, match, placement)
-            errors[placement].append(error)
-        distances.append(distance)
-    if not distances:
-        return np.zeros(0), {p: np.zeros(0) for p in PLACEMENT_SUFFIX}
-    return np.concatenate(distances), {p: np.concatenate(e) for p, e in errors.items()}
+    return _localisation(frames, [_prepare(frame) for frame in frames])

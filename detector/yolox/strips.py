@@ -86,21 +86,26 @@ def full_turn_mask(grid: PolarGrid, xyxy: FloatArray) -> NDArray[np.bool_]:
     return (xyxy[:, 2] - xyxy[:, 0]) >= grid.width - 1e-9
 
 
+def visible_labels(boxes: FloatArray, strip_wh: tuple[int, int]) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """(N, 4) boxes clipped to [−0.5, W − 0.5] × [−0.5, H − 0.5] and (N,) which to keep: at least
+    MIN_VISIBLE of their area inside and both sides ≥ MIN_SIDE_PX. Pixel-centre coordinates."""
+    low, high = np.array([-0.5, -0.5]), np.array(strip_wh, dtype=np.float64) - 0.5
+    clipped = np.concatenate([np.clip(boxes[:, :2], low, high), np.clip(boxes[:, 2:], low, high)], axis=1)
+    area = np.prod(np.maximum(boxes[:, 2:] - boxes[:, :2], 1e-9), axis=1)
+    sides = clipped[:, 2:] - clipped[:, :2]
+    visible = np.prod(np.maximum(sides, 0.0), axis=1) / area
+    return clipped, (visible >= MIN_VISIBLE) & np.all(sides >= MIN_SIDE_PX, axis=1)
+
+
 def label_copies(xyxy: FloatArray, width: int, strip_wh: tuple[int, int]
                  ) -> tuple[FloatArray, NDArray[np.int64], FloatArray]:
     """(N, 4) strip boxes with first-turn centres -> (M, 4) label copies in the strip: each box and
-    its copy one turn (`width` columns) to the right, kept where ≥ MIN_VISIBLE of it lies inside
-    [−0.5, W − 0.5] × [−0.5, H − 0.5], clipped to it; with each copy's source box (M,) and the
-    columns it was moved by (M,). Pixel-centre coordinates."""
+    its copy one turn (`width` columns) to the right, as `visible_labels` keeps them; with each
+    copy's source box (M,) and the columns it was moved by (M,). Pixel-centre coordinates."""
     if len(xyxy) == 0:
         return np.zeros((0, 4)), np.zeros(0, dtype=np.int64), np.zeros(0)
     copies = np.concatenate([xyxy, xyxy + np.array([width, 0.0, width, 0.0])])
-    low, high = np.array([-0.5, -0.5]), np.array(strip_wh, dtype=np.float64) - 0.5
-    clipped = np.concatenate([np.clip(copies[:, :2], low, high), np.clip(copies[:, 2:], low, high)], axis=1)
-    area = np.prod(np.maximum(copies[:, 2:] - copies[:, :2], 1e-9), axis=1)
-    sides = clipped[:, 2:] - clipped[:, :2]
-    visible = np.prod(np.maximum(sides, 0.0), axis=1) / area
-    keep = (visible >= MIN_VISIBLE) & np.all(sides >= MIN_SIDE_PX, axis=1)
+    clipped, keep = visible_labels(copies, strip_wh)
     source = np.tile(np.arange(len(xyxy)), 2)
     moved = np.repeat([0.0, float(width)], len(xyxy))
     return clipped[keep], source[keep], moved[keep]
@@ -109,7 +114,7 @@ def label_copies(xyxy: FloatArray, width: int, strip_wh: tuple[int, int]
 def crop_window(image: NDArray[np.uint8], labels: FloatArray, feet: FloatArray, width: int,
                 rng: np.random.Generator) -> tuple[NDArray[np.uint8], FloatArray, FloatArray]:
     """A window of `width` columns of a strip (H, W, 3), centred near a random label when there is
-    one, with the labels (N, 4) and feet (N, 3) that lie in it (kept as `label_copies` keeps them)."""
+    one, with the labels (N, 4) and feet (N, 3) that lie in it (kept as `visible_labels` keeps them)."""
     strip_w = image.shape[1]
     if width >= strip_w:
         return image, labels, feet
@@ -121,12 +126,10 @@ def crop_window(image: NDArray[np.uint8], labels: FloatArray, feet: FloatArray, 
     x0 = int(np.clip(round(centre - width / 2), 0, strip_w - width))
     shifted = labels - np.array([x0, 0.0, x0, 0.0])
     window = np.ascontiguousarray(image[:, x0:x0 + width])
-    if len(shifted) == 0:
-        return window, shifted, feet
-    kept, source, moved = label_copies(shifted, strip_w * 4, (width, image.shape[0]))  # no seam copies
-    kept_feet = feet[source].copy()
-    kept_feet[:, 0] += moved - x0
-    return window, kept, kept_feet
+    clipped, keep = visible_labels(shifted, (width, image.shape[0]))
+    kept_feet = feet[keep].copy()
+    kept_feet[:, 0] -= x0
+    return window, clipped[keep], kept_feet
 
 
 def place_labels(xyxy: FloatArray, width: int, strip_wh: tuple[int, int]) -> FloatArray:
