@@ -45,28 +45,61 @@ class FrameDetections:
 def select_detections(raw: RawOutputs, mapping: InputMapping, principal_point: tuple[float, float],
                       min_score: float, nms_iou: float | None = 0.6, max_detections: int = 300
                       ) -> FrameDetections:
-    """One image's RawOutputs -> FrameDetections with score ≥ `min_score`, in frame px."""
+    """One image's RawOutputs -> FrameDetections with score ≥ `min_score`, in frame px.
+
+    With NMS (`nms_iou` not None), each kept detection's foot point is the score-weighted mean of
+    those of its cluster (`fused_feet`); without, every output is passed through as it is."""
     boxes = raw.boxes.astype(np.float64)
     scores = raw.scores.astype(np.float64)
-    keep = np.isfinite(scores) & (scores >= min_score) & np.all(np.isfinite(boxes), axis=1)
-    keep[keep] = mapping.has_area(boxes[keep])
+    valid = np.isfinite(scores) & np.all(np.isfinite(boxes), axis=1)
+    valid[valid] = mapping.has_area(boxes[valid])
+    feet = None if raw.foot is None else raw.foot.astype(np.float64)
+    if feet is not None:
+        valid &= np.all(np.isfinite(feet), axis=1)
+    keep = valid & (scores >= min_score)
+    order = (mapping.presuppress(boxes[keep], scores[keep], nms_iou) if nms_iou is not None
+             else np.arange(int(keep.sum())))
+    kept_boxes, kept_scores = boxes[keep][order], scores[keep][order]
     foot = None
-    if raw.foot is not None:
-        foot_input = raw.foot.astype(np.float64)
-        keep &= np.all(np.isfinite(foot_input), axis=1)
-        foot = mapping.points_to_frame(foot_input[keep])
-    boxes, scores = boxes[keep], scores[keep]
-    if nms_iou is not None:
-        first = mapping.presuppress(boxes, scores, nms_iou)
-        boxes, scores = boxes[first], scores[first]
-        foot = None if foot is None else foot[first]
-    boxes_frame = mapping.boxes_to_frame(boxes)
-    if nms_iou is not None and len(scores) > 1:
-        kept = rotated_nms(boxes_frame, scores, principal_point, nms_iou)[:max_detections]
+    if feet is not None:
+        kept_feet = feet[keep][order]
+        if nms_iou is not None:
+            kept_feet = fused_feet(mapping, kept_boxes, kept_scores, kept_feet,
+                                   boxes[valid], scores[valid], feet[valid])
+        foot = mapping.points_to_frame(kept_feet)
+    boxes_frame = mapping.boxes_to_frame(kept_boxes)
+    if nms_iou is not None and len(kept_scores) > 1:
+        kept = rotated_nms(boxes_frame, kept_scores, principal_point, nms_iou)[:max_detections]
     else:
-        kept = np.arange(min(len(scores), max_detections))
-    return FrameDetections(boxes_frame[kept], scores[kept], principal_point,
+        kept = np.arange(min(len(kept_scores), max_detections))
+    return FrameDetections(boxes_frame[kept], kept_scores[kept], principal_point,
                            None if foot is None else foot[kept])
+
+
+FOOT_FUSION_IOU = 0.65  # a candidate votes on a kept detection's foot from this IoU (input px) on
+FOOT_FUSION_SCORE = 0.3  # ... and from this fraction of the kept detection's score
+
+
+def fused_feet(mapping: InputMapping, boxes: FloatArray, scores: FloatArray, feet: FloatArray,
+               candidate_boxes: FloatArray, candidate_scores: FloatArray, candidate_feet: FloatArray
+               ) -> FloatArray:
+    """(N, 2) input-px foot points of the kept `boxes` (N, 4) with `scores` (N,) and their own
+    `feet` (N, 2): each the score-weighted mean of the feet of the candidates (M, the kept ones
+    among them) that overlap it by `FOOT_FUSION_IOU` and score at least `FOOT_FUSION_SCORE` times it.
+
+    The cells around a person each predict the foot from their own view of it; their mean is
+    steadier than the best-scoring cell's alone (measured on the validation renders: mean position
+    error 0.263 -> 0.254 m, the far band 0.56 -> 0.48 m; README, "Foot point"). Boxes are not
+    fused: that lowered real-frame AP75 from 0.19 to 0.01. A view without a cheap IoU (the
+    letterboxed fisheye view) keeps each detection's own foot."""
+    overlap = mapping.overlaps(boxes, candidate_boxes) if len(boxes) else None
+    if overlap is None:
+        return feet
+    votes = (overlap >= FOOT_FUSION_IOU) & (candidate_scores[None, :] >= FOOT_FUSION_SCORE * scores[:, None])
+    weights = np.where(votes, candidate_scores[None, :], 0.0)  # (N, M); a kept box votes for itself
+    total = weights.sum(axis=1, keepdims=True)
+    fused = weights @ candidate_feet / np.maximum(total, 1e-12)
+    return np.asarray(np.where(total > 0, fused, feet), dtype=np.float64)
 
 
 def reduce_like_decode(rgb: NDArray[np.uint8], min_long_side: int) -> NDArray[np.uint8]:
@@ -92,9 +125,9 @@ class ContractModel(Protocol):
 class ModelRunner:
     """Decoded full-size frames with their cameras -> FrameDetections, as the service computes them."""
 
-    def __init__(self, model: ContractModel, nms_iou: float | None = 0.6, max_detections: int = 300) -> None:
+    def __init__(self, model: ContractModel, nms_iou: float | None = None, max_detections: int = 300) -> None:
         self.model = model
-        self.nms_iou = nms_iou
+        self.nms_iou = model.info.nms_iou if nms_iou is None else nms_iou  # None: the model's own
         self.max_detections = max_detections
 
     @property

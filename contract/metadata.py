@@ -8,6 +8,10 @@
   `fishloc.polar_overlap` columns that repeat the first ones; its top row is the ring of the angle
   `fishloc.polar_max_theta_deg` from the optical axis (or the camera's own field, if smaller);
   boxes `xyxy_polar` in strip px.
+
+`fishloc.default_min_score` and `fishloc.nms_iou` are the model's operating point: the score
+threshold and rotated-NMS IoU chosen together on validation renders (`detector.operating_point`).
+A model without `fishloc.nms_iou` (before 0.3.1) is run at 0.6, the value it was tuned with.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ from dataclasses import dataclass
 VIEW_FISHEYE = "fisheye"
 VIEW_POLAR = "polar"
 BOX_FORMATS = {VIEW_FISHEYE: "cxcywh_radius_aligned", VIEW_POLAR: "xyxy_polar"}
+LEGACY_NMS_IOU = 0.6  # the NMS IoU of a model whose metadata names none
 
 
 class ModelError(RuntimeError):
@@ -56,6 +61,7 @@ class ModelInfo:
     licence: str = ""
     polar: PolarSpec | None = None
     sha256: str = ""
+    nms_iou: float = LEGACY_NMS_IOU
 
     def __post_init__(self) -> None:
         if self.view not in BOX_FORMATS:
@@ -66,9 +72,9 @@ class ModelInfo:
         if (self.polar is None) != (self.view != VIEW_POLAR):
             raise ValueError("a polar model needs its strip (fishloc.polar_*), other views none")
         if not (0 <= self.pad_value <= 255 and 0.0 <= self.default_min_score <= 1.0
-                and self.input_size >= 8):
-            raise ValueError(f"pad_value {self.pad_value}, default_min_score {self.default_min_score} "
-                             f"or input_size {self.input_size} out of range")
+                and self.input_size >= 8 and 0.0 < self.nms_iou <= 1.0):
+            raise ValueError(f"pad_value {self.pad_value}, default_min_score {self.default_min_score}, "
+                             f"nms_iou {self.nms_iou} or input_size {self.input_size} out of range")
 
     @property
     def input_wh(self) -> tuple[int, int]:
@@ -83,7 +89,8 @@ class ModelInfo:
             "name": self.name, "version": self.version, "view": self.view,
             "input_size": self.input_size, "input_wh": list(self.input_wh),
             "trained_on": self.trained_on, "box_format": self.box_format,
-            "default_min_score": self.default_min_score, "pad_value": self.pad_value,
+            "default_min_score": self.default_min_score, "nms_iou": self.nms_iou,
+            "pad_value": self.pad_value,
             "licence": self.licence, "sha256": self.sha256,
         }
         if self.polar is not None:
@@ -116,6 +123,7 @@ def parse_metadata(props: dict[str, str], source: str, sha256: str = "") -> Mode
             licence=props.get("fishloc.licence", ""),
             polar=polar,
             sha256=sha256,
+            nms_iou=float(props.get("fishloc.nms_iou", repr(LEGACY_NMS_IOU))),
         )
     except KeyError as error:
         raise ModelError(f"{source}: a {view} model needs the metadata {error.args[0]}") from None
@@ -134,6 +142,7 @@ def metadata_props(info: ModelInfo) -> dict[str, str]:
         "fishloc.model_version": info.version,
         "fishloc.trained_on": info.trained_on,
         "fishloc.default_min_score": repr(float(info.default_min_score)),
+        "fishloc.nms_iou": repr(float(info.nms_iou)),
     }
     if info.licence:
         props["fishloc.licence"] = info.licence

@@ -52,6 +52,11 @@ class InputMapping(Protocol):
         frame (which costs O(N²) polygon clips), best first; all of them where there is none."""
         ...
 
+    def overlaps(self, boxes: NDArray[np.floating], others: NDArray[np.floating]) -> FloatArray | None:
+        """(N, M) IoU in input px of (N, 4) and (M, 4) boxes where the view measures it cheaply
+        (the polar strip), else None."""
+        ...
+
 
 @dataclass(frozen=True)
 class FisheyeInput:
@@ -71,6 +76,9 @@ class FisheyeInput:
     def presuppress(self, boxes: NDArray[np.floating], scores: NDArray[np.floating],
                     iou_threshold: float) -> NDArray[np.int64]:
         return np.argsort(-np.asarray(scores), kind="stable")
+
+    def overlaps(self, boxes: NDArray[np.floating], others: NDArray[np.floating]) -> FloatArray | None:
+        return None  # radius-aligned boxes turn with their position: their IoU is the frame's polygon one
 
 
 @dataclass(frozen=True)
@@ -98,6 +106,15 @@ class PolarInput:
         xywh = np.concatenate([boxes[:, :2], boxes[:, 2:] - boxes[:, :2]], axis=1)
         kept = cv2.dnn.NMSBoxes(xywh.tolist(), np.asarray(scores, dtype=float).tolist(), 0.0, iou_threshold)
         return np.asarray(kept, dtype=np.int64).reshape(-1)
+
+    def overlaps(self, boxes: NDArray[np.floating], others: NDArray[np.floating]) -> FloatArray | None:
+        a, b = np.asarray(boxes, dtype=np.float64)[:, None, :], np.asarray(others, dtype=np.float64)[None]
+        width = np.clip(np.minimum(a[..., 2], b[..., 2]) - np.maximum(a[..., 0], b[..., 0]), 0.0, None)
+        height = np.clip(np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 1], b[..., 1]), 0.0, None)
+        inter = width * height
+        area_a = (a[..., 2] - a[..., 0]) * (a[..., 3] - a[..., 1])
+        area_b = (b[..., 2] - b[..., 0]) * (b[..., 3] - b[..., 1])
+        return np.asarray(inter / np.maximum(area_a + area_b - inter, 1e-12), dtype=np.float64)
 
 
 def polar_radius_px(camera: FisheyeCamera, max_theta_deg: float) -> float:

@@ -16,6 +16,7 @@ from typing import Any
 import torch
 from torch import nn
 
+from contract.metadata import LEGACY_NMS_IOU
 from detector.model import DetectorConfig, build_model
 from detector.yolox.fisheye import ARCH as FISHEYE_ARCH
 from detector.yolox.fisheye import FisheyeDetectorConfig, build_fisheye_network
@@ -39,6 +40,7 @@ class ModelInfo:
     model_version: str = "0.0.0"
     trained_on: str = "untrained"
     default_min_score: float = 0.3
+    nms_iou: float = LEGACY_NMS_IOU  # chosen with the threshold (`detector.operating_point`)
 
 
 def build_network(config: NetworkConfig) -> nn.Module:
@@ -148,13 +150,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--model-version", default=None)
     parser.add_argument("--trained-on", default=None)
     parser.add_argument("--min-score", type=float, default=None, help="the default score threshold")
+    parser.add_argument("--nms-iou", type=float, default=None, help="the rotated NMS IoU")
     args = parser.parse_args(argv)
     try:
         info = load_checkpoint(args.source).info
         info = ModelInfo(model_version=args.model_version or info.model_version,
                          trained_on=args.trained_on or info.trained_on,
                          default_min_score=info.default_min_score if args.min_score is None
-                         else args.min_score)
+                         else args.min_score,
+                         nms_iou=info.nms_iou if args.nms_iou is None else args.nms_iou)
         shipped = save_release(args.source, args.target, info)
     except CheckpointError as error:
         print(f"detector.checkpoint: {error}", file=sys.stderr)

@@ -33,6 +33,7 @@ from contract import (
     RawOutputs,
     SessionThreads,
 )
+from contract.detect import ContractModel
 from detector.checkpoint import CheckpointError, load_checkpoint
 from detector.data.dataset import load_rgb
 from detector.data.readers import DatasetFormatError, FrameAnnotations, read_dataset
@@ -45,6 +46,15 @@ from detector.metrics import (
     compute_metrics,
     localisation_points,
     pr_curve,
+)
+from detector.operating_point import (
+    NMS_GRID,
+    OperatingPoint,
+    choose,
+    describe,
+    detections_at,
+    model_outputs,
+    sweep,
 )
 from detector.plots import plot_pe_by_distance, plot_pr_curve
 from fisheye import FisheyeCamera, assumed_camera
@@ -93,13 +103,17 @@ def torch_predictor(module: nn.Module, info: ModelInfo) -> RunnerPredictor:
     return RunnerPredictor(ModelRunner(TorchContract(module, info)))
 
 
+def load_contract_model(path: str | Path, threads: int | None = None, device: str = "cpu") -> ContractModel:
+    """An ONNX file (by its .onnx suffix) or a training checkpoint as a model of the contract."""
+    if Path(path).suffix.lower() == ".onnx":
+        return OnnxModel(path, SessionThreads(intra_op=threads or torch.get_num_threads()))
+    checkpoint = load_checkpoint(path)
+    return TorchContract(contract_module(checkpoint, str(path)).to(device), contract_info(checkpoint))
+
+
 def load_predictor(path: str | Path, device: str = "cpu", threads: int | None = None) -> Predictor:
     """An ONNX file (by its .onnx suffix) or a training checkpoint."""
-    if Path(path).suffix.lower() == ".onnx":
-        model = OnnxModel(path, SessionThreads(intra_op=threads or torch.get_num_threads()))
-        return RunnerPredictor(ModelRunner(model))
-    checkpoint = load_checkpoint(path)
-    return torch_predictor(contract_module(checkpoint, str(path)).to(device), contract_info(checkpoint))
+    return RunnerPredictor(ModelRunner(load_contract_model(path, threads, device)))
 
 
 def frame_camera(frame: FrameAnnotations) -> FisheyeCamera:
@@ -116,26 +130,48 @@ def _corners_or_none(cxcywha: NDArray[np.float64] | None) -> NDArray[np.float64]
     return None if cxcywha is None else cepdof_to_corners(cxcywha)
 
 
+def eval_frame(frame: FrameAnnotations, detections: FrameDetections) -> EvalFrame:
+    """An annotated frame and its detections -> what the metrics score."""
+    return EvalFrame(
+        gt_boxes=frame.boxes_cxcywh, gt_locations_m=frame.locations_m,
+        gt_distances_m=frame.distances_m, det_boxes=detections.boxes_cxcywh,
+        det_scores=detections.scores, principal_point=frame.principal_point,
+        camera=frame.camera, split=frame.split, crowd_boxes=frame.crowd_cxcywh,
+        # CEPDOF/WEPDTOF frames are scored against the file's own boxes (DESIGN.md).
+        gt_corners=_corners_or_none(frame.file_boxes_cxcywha),
+        crowd_corners=_corners_or_none(frame.file_crowd_cxcywha),
+        camera_assumed=frame.camera_assumed, det_foot_px=detections.foot_px)
+
+
 def eval_frames(predictor: Predictor, frames: Sequence[FrameAnnotations], batch_size: int = 8,
                 progress: bool = False) -> list[EvalFrame]:
-    """Run the predictor over annotated frames -> EvalFrames (detections with score ≥ 0.01)."""
+    """Run the predictor over annotated frames -> EvalFrames (detections with score ≥ 0.05)."""
     result: list[EvalFrame] = []
     batches = range(0, len(frames), batch_size)
     for start in tqdm(batches, desc="eval", unit="batch", disable=not progress):
         chunk = frames[start:start + batch_size]
         found = predictor.detect([load_rgb(f) for f in chunk], [frame_camera(f) for f in chunk],
                                  EVAL_MIN_SCORE)
-        for frame, detections in zip(chunk, found, strict=True):
-            result.append(EvalFrame(
-                gt_boxes=frame.boxes_cxcywh, gt_locations_m=frame.locations_m,
-                gt_distances_m=frame.distances_m, det_boxes=detections.boxes_cxcywh,
-                det_scores=detections.scores, principal_point=frame.principal_point,
-                camera=frame.camera, split=frame.split, crowd_boxes=frame.crowd_cxcywh,
-                # CEPDOF/WEPDTOF frames are scored against the file's own boxes (DESIGN.md).
-                gt_corners=_corners_or_none(frame.file_boxes_cxcywha),
-                crowd_corners=_corners_or_none(frame.file_crowd_cxcywha),
-                camera_assumed=frame.camera_assumed, det_foot_px=detections.foot_px))
+        result.extend(eval_frame(frame, detections) for frame, detections in zip(chunk, found, strict=True))
     return result
+
+
+def choose_operating_point(model: ContractModel, frames: Sequence[FrameAnnotations],
+                           grid: Sequence[float] = NMS_GRID
+                           ) -> tuple[OperatingPoint, Evaluation, list[OperatingPoint]]:
+    """The best-F1 (NMS IoU, threshold) of `model` on validation `frames` (`detector.operating_point`),
+    the evaluation there (its metrics with `min_score` and `nms_iou`), and every IoU's point."""
+    outputs = model_outputs(model, frames, [frame_camera(f) for f in frames])
+
+    def frames_at(nms_iou: float) -> list[EvalFrame]:
+        found = detections_at(outputs, EVAL_MIN_SCORE, nms_iou)
+        return [eval_frame(frame, detections) for frame, detections in zip(frames, found, strict=True)]
+
+    points = sweep(frames_at, grid)
+    best = choose([point for point, _ in points])
+    evaluated = next(frames for point, frames in points if point == best)
+    metrics = {**summarise(evaluated, best.min_score), "nms_iou": best.nms_iou}
+    return best, Evaluation(evaluated, metrics), [p for p, _ in points]
 
 
 def summarise(frames: Sequence[EvalFrame], min_score: float) -> dict[str, Any]:
@@ -185,22 +221,38 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--plots", default=None, help="folder for pr_curve.png and pe_by_distance.png")
     parser.add_argument("--min-score", type=float, default=None,
                         help="threshold of precision/recall (default: the model's own)")
+    parser.add_argument("--nms-iou", type=float, default=None,
+                        help="rotated NMS IoU (default: the model's own, fishloc.nms_iou)")
+    parser.add_argument("--operating-point", action="store_true",
+                        help="choose the NMS IoU and threshold of best F1 on this data (validation "
+                             "renders only) and report there; each IoU's point goes into the JSON")
     parser.add_argument("--limit", type=int, default=None, help="evaluate the first N frames only")
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.nms_iou is not None and not 0.0 < args.nms_iou <= 1.0:
+        print(f"fishloc eval: --nms-iou must lie in (0, 1], got {args.nms_iou}", file=sys.stderr)
+        return 2
     try:
-        predictor = load_predictor(args.model)
+        model = load_contract_model(args.model)
         frames = read_dataset(args.data)
     except (CheckpointError, ModelError, DatasetFormatError) as error:
         print(f"fishloc eval: {error}", file=sys.stderr)
         return 2
     if args.limit is not None:
         frames = frames[:args.limit]
-    if args.min_score is not None:
-        predictor.default_min_score = args.min_score
-    evaluation = evaluate(predictor, frames, progress=True)
-    metrics = json_safe({**evaluation.metrics, "model": str(args.model), "data": str(args.data)})
+    extra: dict[str, Any] = {}
+    if args.operating_point:
+        best, evaluation, points = choose_operating_point(model, frames)
+        print(json.dumps({"operating_point": describe([best])[0]}))
+        extra["operating_points"] = describe(points)
+    else:
+        predictor = RunnerPredictor(ModelRunner(model, args.nms_iou))
+        if args.min_score is not None:
+            predictor.default_min_score = args.min_score
+        evaluation = evaluate(predictor, frames, progress=True)
+        extra["nms_iou"] = predictor.runner.nms_iou
+    metrics = json_safe({**evaluation.metrics, **extra, "model": str(args.model), "data": str(args.data)})
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
     if args.plots:

@@ -6,6 +6,8 @@ service only letterboxes frames and reads `boxes` (N, K, 4) and `scores` (N, K).
 
 from __future__ import annotations
 
+import dataclasses
+
 from torch import Tensor, nn
 
 from contract import BOX_FORMATS, VIEW_FISHEYE, ModelInfo
@@ -45,8 +47,10 @@ def contract_info(checkpoint: Checkpoint) -> ModelInfo:
     """The contract metadata that `checkpoint`'s export carries (and evaluation reads it by)."""
     config, info = checkpoint.config, checkpoint.info
     if isinstance(config, PolarDetectorConfig | FisheyeDetectorConfig):
-        return config.model_info(info.model_version, info.trained_on, info.default_min_score)
-    return centernet_info(config, info)
+        base = config.model_info(info.model_version, info.trained_on, info.default_min_score)
+    else:
+        base = centernet_info(config, info)
+    return dataclasses.replace(base, nms_iou=info.nms_iou)
 
 
 def contract_module(checkpoint: Checkpoint, source: str = "<memory>") -> nn.Module:

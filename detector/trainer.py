@@ -15,17 +15,15 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 from tqdm import tqdm
 
 from detector.checkpoint import Checkpoint, ModelInfo, load_checkpoint, save_checkpoint
 from detector.data.dataset import AugmentConfig, DetectionDataset, collate
 from detector.data.readers import FrameAnnotations
-from detector.evaluate import eval_frames, json_safe, summarise, torch_predictor
+from detector.evaluate import TorchContract, choose_operating_point, json_safe
 from detector.graph import ContractModel, centernet_info
 from detector.losses import DetectionLoss, LossConfig
-from detector.metrics import pr_curve
 from detector.model import DetectorConfig, FishLocNet, build_model
 from detector.plots import plot_training
 from detector.schedule import restore_rng, rng_state, seed_everything, warmup_cosine
@@ -55,15 +53,6 @@ def resolve_device(name: str) -> torch.device:
     if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     return torch.device(name)
-
-
-def best_f1_threshold(frames: list[Any]) -> float:
-    """The score threshold of best F1 at IoU 0.5 (clamped to [0.1, 0.9]); 0.3 without detections."""
-    precision, recall, scores = pr_curve(frames)
-    if len(scores) == 0:
-        return 0.3
-    f1 = 2 * precision * recall / np.maximum(precision + recall, 1e-9)
-    return float(np.clip(scores[int(np.argmax(f1))], 0.1, 0.9))
 
 
 class Trainer:
@@ -157,12 +146,10 @@ class Trainer:
         if not self.val_frames:
             return {}
         self.model.eval()
-        predictor = torch_predictor(ContractModel(self.model), centernet_info(self.model.config, self.info))
-        frames = eval_frames(predictor, self.val_frames)
-        threshold = best_f1_threshold(frames)
-        metrics = summarise(frames, threshold)
+        model = TorchContract(ContractModel(self.model), centernet_info(self.model.config, self.info))
+        _, evaluation, _ = choose_operating_point(model, self.val_frames)
         self.model.train()
-        return {k: v for k, v in metrics.items() if isinstance(v, float)}
+        return {k: v for k, v in evaluation.metrics.items() if isinstance(v, float)}
 
     def fit(self) -> list[dict[str, Any]]:
         """Train until `config.epochs` epochs are complete; returns this run's log records."""
@@ -176,6 +163,7 @@ class Trainer:
             self.info.model_version = f"{self.out.name}-e{self.epoch}"
             if "min_score" in val:
                 self.info.default_min_score = round(float(val["min_score"]), 3)
+                self.info.nms_iou = float(val["nms_iou"])
             score = val.get("mAP", -train_terms["total"])
             score = -math.inf if not math.isfinite(score) else score
             record = {"epoch": self.epoch, "train": train_terms, "val": val,

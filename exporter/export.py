@@ -161,6 +161,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--trained-on", default=None, help="override fishloc.trained_on")
     parser.add_argument("--min-score", type=float, default=None,
                         help="override fishloc.default_min_score")
+    parser.add_argument("--nms-iou", type=float, default=None, help="override fishloc.nms_iou")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -179,6 +180,8 @@ def run(args: argparse.Namespace) -> int:
         info.trained_on = args.trained_on
     if args.min_score is not None:
         info.default_min_score = args.min_score
+    if args.nms_iou is not None:
+        info.nms_iou = args.nms_iou
     try:
         checkpoint.build(args.checkpoint)  # a mismatched checkpoint fails here, with its own message
         calibration = None

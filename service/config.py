@@ -65,7 +65,8 @@ class Settings(BaseSettings):
     max_in_flight: int | None = Field(None, ge=1,
                                       description="frames admitted at once before 503 (default 4 × threads)")
     retry_after_s: int = Field(1, ge=1, description="Retry-After of an overload answer")
-    nms_iou: float = Field(0.6, gt=0, le=1, description="rotated NMS IoU threshold")
+    nms_iou: float | None = Field(None, gt=0, le=1,
+                                  description="rotated NMS IoU threshold (default: the model's own)")
     grpc_max_message_bytes: int = Field(32 * 1024 * 1024, ge=1024)
     log_level: str = Field("info", description="debug, info, warning, error")
     log_json: bool = Field(True, description="JSON log lines (false: plain text)")

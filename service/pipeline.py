@@ -39,13 +39,13 @@ log = logging.getLogger(__name__)
 class PipelineConfig:
     """Post-processing and safety limits of the pipeline."""
 
-    nms_iou: float = 0.6
+    nms_iou: float | None = None  # None: the model's own (`fishloc.nms_iou`)
     max_detections: int = 300
     max_pixels: int = 40_000_000
     min_frame_side_px: int = 16  # smaller frames cannot show a person; refused, not guessed at
 
     def __post_init__(self) -> None:
-        if not 0.0 < self.nms_iou <= 1.0:
+        if self.nms_iou is not None and not 0.0 < self.nms_iou <= 1.0:
             raise ValueError(f"nms_iou must be in (0, 1], got {self.nms_iou}")
         if self.max_detections < 1 or self.max_pixels < 1:
             raise ValueError("max_detections and max_pixels must be positive")
@@ -149,4 +149,5 @@ class Pipeline:
         """Model outputs -> the kept detections in frame px: score threshold, finite positive boxes,
         rotated NMS about `camera`'s principal point, at most max_detections."""
         pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
-        return select_raw(raw, mapping, pp, threshold, self.config.nms_iou, self.config.max_detections)
+        nms_iou = self.info.nms_iou if self.config.nms_iou is None else self.config.nms_iou
+        return select_raw(raw, mapping, pp, threshold, nms_iou, self.config.max_detections)

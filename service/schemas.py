@@ -115,6 +115,7 @@ class ModelResponse(BaseModel):
     trained_on: str
     box_format: str
     default_min_score: float
+    nms_iou: float = Field(description="rotated NMS IoU the service runs the model at")
     pad_value: int
     sha256: str = Field(description="SHA-256 of the model file")
 

@@ -35,10 +35,10 @@ from detector.checkpoint import (
     save_checkpoint,
 )
 from detector.data.readers import FrameAnnotations
-from detector.evaluate import eval_frames, json_safe, summarise, torch_predictor
+from detector.evaluate import TorchContract, choose_operating_point, json_safe
 from detector.graph import contract_info, contract_module
 from detector.schedule import restore_rng, rng_state, seed_everything, warmup_cosine
-from detector.trainer import best_f1_threshold, resolve_device
+from detector.trainer import resolve_device
 from detector.yolox.fisheye import ARCH as FISHEYE_ARCH
 from detector.yolox.fisheye import FisheyeDetectorConfig
 from detector.yolox.frames import FisheyeFrameDataset, FrameAugment
@@ -253,10 +253,9 @@ class Finetuner:
         if not self.val_frames:
             return {}
         checkpoint = self.checkpoint()
-        module = contract_module(checkpoint).to(self.device)
-        frames = eval_frames(torch_predictor(module, contract_info(checkpoint)), self.val_frames)
-        metrics = summarise(frames, best_f1_threshold(frames))
-        return {k: v for k, v in metrics.items() if isinstance(v, float)}
+        model = TorchContract(contract_module(checkpoint).to(self.device), contract_info(checkpoint))
+        _, evaluation, _ = choose_operating_point(model, self.val_frames)
+        return {k: v for k, v in evaluation.metrics.items() if isinstance(v, float)}
 
     def fit(self, stop_after_steps: int | None = None) -> list[dict[str, Any]]:
         """Train until `config.epochs` are complete (or `stop_after_steps` optimizer steps in all,
@@ -297,6 +296,7 @@ class Finetuner:
         self.info.model_version = f"{self.out.name}-e{self.epoch}"
         if "min_score" in val:
             self.info.default_min_score = round(float(val["min_score"]), 3)
+            self.info.nms_iou = float(val["nms_iou"])
         record = {"epoch": self.epoch, "step": self.step, "train": train_terms, "val": val,
                   "lr": self.scheduler.get_last_lr()[0], "seconds": round(seconds, 1),
                   **self.train_set.left_out()}

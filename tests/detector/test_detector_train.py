@@ -15,6 +15,7 @@ from detector.evaluate import evaluate, torch_predictor
 from detector.graph import ContractModel, centernet_info
 from detector.losses import DetectionLoss, LossConfig
 from detector.model import build_model, tiny_config
+from detector.operating_point import NMS_GRID
 from detector.trainer import TrainConfig, Trainer
 from service.cli import main
 
@@ -111,5 +112,16 @@ def test_train_eval_and_export_commands(toy_dataset: Callable[..., Path], tmp_pa
                 "mPE_center", "precision", "recall"):
         assert key in results[".onnx"]
     assert results[".pt"]["AP50"] == pytest.approx(results[".onnx"]["AP50"], abs=1e-6)
+    trained = load_checkpoint(out / "last.pt").info  # its operating point, chosen on --val
+    assert results[".onnx"]["nms_iou"] == trained.nms_iou and trained.nms_iou in NMS_GRID
+    chosen = tmp_path / "chosen.json"
+    assert main(["eval", "--model", str(onnx_path), "--data", str(both), "--json", str(chosen),
+                 "--operating-point"]) == 0
+    swept = json.loads(chosen.read_text())
+    assert [p["nms_iou"] for p in swept["operating_points"]] == list(NMS_GRID)
+    best = max(swept["operating_points"], key=lambda p: p["f1"])
+    assert (swept["nms_iou"], swept["min_score"]) == (best["nms_iou"], best["min_score"])
+    assert main(["eval", "--model", str(onnx_path), "--data", str(both), "--json", str(chosen),
+                 "--nms-iou", "1.5"]) == 2
     for plot in ("pr_curve.png", "pe_by_distance.png"):
         assert (tmp_path / "plots" / plot).exists()
