@@ -25,7 +25,7 @@ def test_nms_iou_is_read_from_the_metadata_and_defaults_to_the_legacy_value() ->
 
 @pytest.mark.parametrize("value", ["0", "1.5", "nan", "-0.2", "half"])
 def test_an_unusable_nms_iou_is_refused(value: str) -> None:
-    with pytest.raises(ModelError, match="m.onnx"):
+    with pytest.raises(ModelError, match=r"m\.onnx: unusable"):
         parse_metadata({**METADATA, "fishloc.nms_iou": value}, "m.onnx")
 
 

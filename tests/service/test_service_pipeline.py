@@ -19,6 +19,8 @@ from service_doubles import (
     CONSTANT_SCORES,
     DEFAULT_MIN_SCORE,
     INPUT_SIZE,
+    METADATA,
+    save_double_model,
 )
 from service_frames import encode, person_frame
 
@@ -108,6 +110,20 @@ def test_min_score_and_nms(pipeline: Pipeline, demo_camera: FisheyeCamera) -> No
     assert pipeline.info.default_min_score == DEFAULT_MIN_SCORE
     with pytest.raises(ValueError, match="min_score"):
         pipeline.detect(black, demo_camera, min_score=1.5)
+
+
+def test_the_model_s_own_nms_iou_is_used_unless_the_service_sets_one(tmp_path: Path,
+                                                                     demo_camera: FisheyeCamera) -> None:
+    black = encode(np.zeros((2048, 2048, 3), dtype=np.uint8))
+    path = save_double_model(tmp_path / "no-nms.onnx", metadata={**METADATA, "fishloc.nms_iou": "1.0"})
+    own = Pipeline(OnnxModel(path, SessionThreads(intra_op=1)), PipelineConfig())
+    assert own.info.nms_iou == 1.0
+    # A' overlaps A: kept at the model's IoU of 1.0, removed when the service asks for 0.6.
+    np.testing.assert_allclose(own.detect(black, demo_camera, min_score=0.1).detections.scores,
+                               CONSTANT_SCORES[:3], atol=1e-6)
+    service = Pipeline(OnnxModel(path, SessionThreads(intra_op=1)), PipelineConfig(nms_iou=0.6))
+    np.testing.assert_allclose(service.detect(black, demo_camera, min_score=0.1).detections.scores,
+                               CONSTANT_SCORES[[0, 2]], atol=1e-6)
 
 
 def test_site_positions_follow_the_site_pose(pipeline: Pipeline, demo_camera: FisheyeCamera) -> None:
