@@ -68,6 +68,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="add the foot output (each box's floor-contact point, learnt from the "
                             "renders' location_m); train it alone with --freeze stem dark2 dark3 dark4 "
                             "dark5 neck head --distill 0")
+    polar.add_argument("--foot-refine", action="store_true",
+                       help="add the foot output's second stage (stride-8 features read about each "
+                            "coarse foot point; detector.yolox.foot.FootRefiner); implies --foot")
     polar.add_argument("--view", choices=("polar", "fisheye"), default=None,
                        help="what the YOLOX reads: the polar unwrap (default) or the letterboxed frame "
                             "with a radius-aligned head (--input-size, default 640)")
@@ -158,10 +161,10 @@ def initial_network(args: argparse.Namespace, model_config: YoloxDetectorConfig
     """The network `--init-from` starts from and its config: the COCO ONNX's person network in
     `model_config`, or a polar checkpoint's own network and strip; `--foot` adds the foot branch."""
     if Path(args.init_from).suffix.lower() != ".pt":
-        if args.foot:
+        if args.foot or args.foot_refine:
             if not isinstance(model_config, PolarDetectorConfig):
                 raise ValueError("--foot is an option of the polar view")
-            model_config = replace(model_config, foot=True)
+            model_config = replace(model_config, foot=True, foot_refine=bool(args.foot_refine))
         return model_config, init_from_pretrained(args.init_from, model_config)
     checkpoint = load_checkpoint(args.init_from)
     if not isinstance(checkpoint.config, PolarDetectorConfig):
@@ -174,8 +177,10 @@ def initial_network(args: argparse.Namespace, model_config: YoloxDetectorConfig
     if not isinstance(network, YoloxNano):
         raise ValueError(f"{args.init_from} holds no YOLOX network")
     model_config = checkpoint.config
-    if args.foot and not model_config.foot:
+    if (args.foot or args.foot_refine) and not model_config.foot:
         model_config, network = replace(model_config, foot=True), network.with_foot()
+    if args.foot_refine and not model_config.foot_refine:
+        model_config, network = replace(model_config, foot_refine=True), network.with_foot_refiner()
     return model_config, network
 
 

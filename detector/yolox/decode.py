@@ -68,7 +68,7 @@ def top_people(net: nn.Module, image: Tensor, max_detections: int) -> tuple[Tens
     bgr = image.permute(0, 3, 1, 2).flip(1).float()  # (N, 3, H, W) BGR 0-255, as YOLOX was trained
     offsets: list[Tensor] | None = None
     if isinstance(net, YoloxNano) and net.foot is not None:
-        maps, offsets = net.forward_with_foot(bgr)
+        maps, offsets, fine = net.forward_with_foot(bgr)
     else:
         maps = net(bgr)
     decoded = decode(maps)  # (N, A, 5 + C): cxcywh px, objectness, classes
@@ -79,4 +79,5 @@ def top_people(net: nn.Module, image: Tensor, max_detections: int) -> tuple[Tens
     if offsets is None:
         return cxcywh, top_scores, None
     ab = torch.gather(flatten_maps(offsets), 1, top[..., None].expand(-1, -1, 2))  # (N, K, 2)
-    return cxcywh, top_scores, foot_from_offsets(ab, cxcywh)
+    assert isinstance(net, YoloxNano) and net.foot is not None
+    return cxcywh, top_scores, net.foot.refine(fine, foot_from_offsets(ab, cxcywh))

@@ -235,8 +235,10 @@ class Finetuner:
                 teacher_maps = self.teacher(images)
         feet = collate_feet(samples) if self.model.foot is not None else None
         if feet is not None:
-            maps, offsets = self.model.forward_with_foot(images)
-            terms = self.loss(maps, labels, teacher_maps, offsets, feet)
+            maps, offsets, fine = self.model.forward_with_foot(images)
+            refiner = self.model.foot.refiner if self.model.foot is not None else None
+            terms = self.loss(maps, labels, teacher_maps, offsets, feet,
+                              (fine, refiner) if refiner is not None else None)
         else:
             terms = self.loss(self.model(images), labels, teacher_maps)
         self.optimizer.zero_grad(set_to_none=True)

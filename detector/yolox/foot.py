@@ -24,12 +24,13 @@ the near band, where most people stand, hardly learnt (measured: README, "Foot p
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import torch
 from numpy.typing import NDArray
 from torch import Tensor, nn
+from torch.nn import functional
 
 from detector.yolox.blocks import conv_block
 from fisheye import FisheyeCamera
@@ -38,13 +39,18 @@ from fisheye.polar import PolarGrid
 FloatArray = NDArray[np.float64]
 FOOT_CHANNELS = 2  # a, b of the module docstring
 MAX_METRES_PER_PX = 0.1  # cap of the loss weight (module docstring)
+REFINE_STRIDE = 8  # the refiner reads the finest level's stem output
+REFINE_SIDE = 5  # samples per side of the patch it reads about a coarse foot point
+REFINE_STEP_PX = 4.0  # strip px between two samples (half a stride-8 cell)
+REFINE_SCALE_PX = 8.0  # strip px per unit of its output
 
 
 class FootHead(nn.Module):
     """The head's stem outputs of the 3 levels (B, width, h_i, w_i) -> offsets (B, 2, h_i, w_i)."""
 
-    def __init__(self, width: int, levels: int, depthwise: bool) -> None:
+    def __init__(self, width: int, levels: int, depthwise: bool, refine: bool = False) -> None:
         super().__init__()
+        self.refiner = FootRefiner(width) if refine else None
         self.convs = nn.ModuleList([nn.Sequential(conv_block(width, width, 3, 1, depthwise),
                                                   conv_block(width, width, 3, 1, depthwise))
                                     for _ in range(levels)])
@@ -57,6 +63,53 @@ class FootHead(nn.Module):
     def forward(self, stem_features: Sequence[Tensor]) -> list[Tensor]:
         return [pred(conv(x)) for x, conv, pred in zip(stem_features, self.convs, self.preds, strict=True)]
 
+    def refine(self, fine_features: Tensor, points: Tensor) -> Tensor:
+        """(B, K, 2) coarse foot points -> the refiner's (the same points without one)."""
+        return points if self.refiner is None else self.refiner(fine_features, points)
+
+
+class FootRefiner(nn.Module):
+    """A second stage: the finest level's stem output (B, width, H/8, W/8) sampled on a
+    `REFINE_SIDE`² patch about each coarse foot point (B, K, 2) px -> a correction of that point.
+
+    The coarse point comes from a cell of the level that owns the person, for a near person a
+    stride-32 cell whose regression is a few pixels coarse; the patch reads the stride-8 features
+    at the point itself (bilinear, `grid_sample`, an ONNX `GridSample`). Its last layer starts at
+    zero: an untrained refiner returns the coarse point."""
+
+    def __init__(self, width: int, hidden: int = 128) -> None:
+        super().__init__()
+        self.mlp = nn.Sequential(nn.Linear(width * REFINE_SIDE ** 2, hidden), nn.SiLU(), nn.Linear(hidden, 2))
+        last = self.mlp[-1]
+        assert isinstance(last, nn.Linear)
+        nn.init.zeros_(last.weight)
+        nn.init.zeros_(last.bias)
+        ticks = (torch.arange(REFINE_SIDE, dtype=torch.float32) - (REFINE_SIDE - 1) / 2) * REFINE_STEP_PX
+        rows, cols = torch.meshgrid(ticks, ticks, indexing="ij")
+        self.register_buffer("pattern", torch.stack([cols, rows], dim=-1).reshape(-1, 2), persistent=False)
+
+    def patches(self, fine_features: Tensor, points: Tensor) -> Tensor:
+        """(B, C, h, w) stride-8 features, (B, K, 2) px points -> (B, K, C, S²) samples about them."""
+        _, _, height, width = fine_features.shape
+        pattern = self.get_buffer("pattern")  # (S², 2) px about the point
+        where = points[:, :, None, :] + pattern  # (B, K, S², 2) px, YOLOX edge coordinates
+        extent = torch.stack([torch.full_like(where[..., 0], float(width * REFINE_STRIDE)),
+                              torch.full_like(where[..., 1], float(height * REFINE_STRIDE))], dim=-1)
+        grid = where / extent * 2.0 - 1.0  # align_corners=False: -1 and 1 are the map's outer edges
+        sampled = functional.grid_sample(fine_features, grid, mode="bilinear", padding_mode="border",
+                                         align_corners=False)  # (B, C, K, S²)
+        return sampled.permute(0, 2, 1, 3)
+
+    def forward(self, fine_features: Tensor, points: Tensor) -> Tensor:
+        batch, count = points.shape[:2]
+        flat = self.patches(fine_features, points).reshape(batch, count, -1)  # (B, K, C S²)
+        return points + self.mlp(flat) * REFINE_SCALE_PX
+
+
+def refine_points(refiner: FootRefiner, fine_features: Tensor, points: Tensor) -> Tensor:
+    """(P, 2) coarse points of one image with its (1, C, h, w) stride-8 features -> refined (P, 2)."""
+    return refiner(fine_features, points[None])[0]
+
 
 def foot_from_offsets(offsets: Tensor, cxcywh: Tensor) -> Tensor:
     """(..., 2) offsets a, b and (..., 4) `cxcywh` boxes -> (..., 2) foot points, same px."""
@@ -65,8 +118,10 @@ def foot_from_offsets(offsets: Tensor, cxcywh: Tensor) -> Tensor:
     return torch.stack([centre_x + offsets[..., 0] * width, bottom + offsets[..., 1] * height], dim=-1)
 
 
-def foot_loss(offsets: Tensor, boxes_xyxy: Tensor, targets: Tensor) -> tuple[Tensor, int]:
-    """Sum over positives of metres-weighted L1 and their count.
+def foot_loss(offsets: Tensor, boxes_xyxy: Tensor, targets: Tensor,
+              refine: Callable[[Tensor], Tensor] | None = None) -> tuple[Tensor, int]:
+    """Sum over positives of metres-weighted L1 and their count (with `refine`, a map of (V, 2)
+    coarse points to refined ones, the mean of the coarse and the refined points' losses).
 
     offsets (P, 2) predicted a, b; boxes_xyxy (P, 4) the cells' decoded boxes (the foot is read off
     the box the model itself predicts, as at inference); targets (P, 3) foot x, y (px) and metres
@@ -77,8 +132,11 @@ def foot_loss(offsets: Tensor, boxes_xyxy: Tensor, targets: Tensor) -> tuple[Ten
     boxes = boxes_xyxy[valid].detach()
     cxcywh = torch.cat([(boxes[:, :2] + boxes[:, 2:]) / 2, boxes[:, 2:] - boxes[:, :2]], dim=1)
     predicted = foot_from_offsets(offsets[valid], cxcywh)  # (V, 2) px
+    weight = targets[valid, 2].clamp(max=MAX_METRES_PER_PX)
     error = (predicted - targets[valid, :2]).abs().sum(dim=1)  # (V,) px
-    return (error * targets[valid, 2].clamp(max=MAX_METRES_PER_PX)).sum(), int(valid.sum())
+    if refine is not None:
+        error = (error + (refine(predicted) - targets[valid, :2]).abs().sum(dim=1)) / 2
+    return (error * weight).sum(), int(valid.sum())
 
 
 def metres_per_px(grid: PolarGrid, camera: FisheyeCamera, strip_xy: FloatArray) -> FloatArray:

@@ -36,6 +36,7 @@ class YoloxConfig:
     prior_prob: float = 0.01  # initial objectness and class probability of an untrained head
     model_name: str = "yolox-nano"
     foot: bool = False  # a foot branch on the box branch (detector.yolox.foot)
+    foot_refine: bool = False  # and its second stage on the stride-8 features (FootRefiner)
 
     def __post_init__(self) -> None:
         if self.num_classes < 1:
@@ -78,7 +79,8 @@ class YoloxNano(nn.Module):
         self.neck = PAFPN(config.level_channels, config.neck_depth, config.depthwise)
         self.head = YoloxHead(config.num_classes, config.level_channels, config.head_width,
                               config.depthwise, config.prior_prob)
-        self.foot = FootHead(config.head_width, len(STRIDES), config.depthwise) if config.foot else None
+        self.foot = (FootHead(config.head_width, len(STRIDES), config.depthwise, config.foot_refine)
+                     if config.foot else None)
 
     def forward(self, images: Tensor) -> list[Tensor]:
         features = self.backbone(images)  # strides 8, 16, 32
@@ -86,13 +88,25 @@ class YoloxNano(nn.Module):
         maps: list[Tensor] = self.head(fused)  # (B, 5 + C, H/s, W/s) per stride s
         return maps
 
-    def forward_with_foot(self, images: Tensor) -> tuple[list[Tensor], list[Tensor]]:
-        """The maps and the foot offsets (B, 2, H/s, W/s) per stride s (a network with a foot branch)."""
+    def forward_with_foot(self, images: Tensor) -> tuple[list[Tensor], list[Tensor], Tensor]:
+        """The maps, the foot offsets (B, 2, H/s, W/s) per stride s and the stride-8 stem output
+        the foot's refiner reads (a network with a foot branch)."""
         if self.foot is None:
             raise ValueError("this network has no foot branch (YoloxConfig.foot)")
         maps, stem_features = self.head.forward_features(self.neck(self.backbone(images)))
         offsets: list[Tensor] = self.foot(stem_features)
-        return maps, offsets
+        return maps, offsets, stem_features[0]
+
+    def with_foot_refiner(self) -> YoloxNano:
+        """A copy whose foot branch has a new (untrained, identity) refiner; all else unchanged."""
+        if self.foot is None:
+            raise ValueError("a foot refiner needs a foot branch (YoloxConfig.foot)")
+        refined = YoloxNano(replace(self.config, foot_refine=True))
+        missing, unexpected = refined.load_state_dict(self.state_dict(), strict=False)
+        if unexpected or not all(key.startswith("foot.refiner.") for key in missing):
+            raise ValueError(f"with_foot_refiner: unexpected weights {unexpected}, missing {missing}")
+        device = next(self.parameters()).device
+        return refined.to(device).train(self.training)
 
     def with_foot(self) -> YoloxNano:
         """A copy with a new foot branch (its convolutions a copy of the box branch's, its offsets
@@ -140,7 +154,8 @@ class DetectorConfigRecord:
     @property
     def yolox(self) -> YoloxConfig:
         return YoloxConfig(num_classes=self.num_classes, depth=self.depth, width=self.width,
-                           foot=bool(getattr(self, "foot", False)))
+                           foot=bool(getattr(self, "foot", False)),
+                           foot_refine=bool(getattr(self, "foot_refine", False)))
 
     def to_dict(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in fields(self)}  # type: ignore[arg-type]

@@ -44,6 +44,7 @@ class PolarDetectorConfig(DetectorConfigRecord):
     # within this fraction of the strip's radius (detector.yolox.inner_head); 0: one head.
     inner_fraction: float = 0.0
     foot: bool = False  # a foot output: each box's floor-contact point (detector.yolox.foot)
+    foot_refine: bool = False  # its second stage on the stride-8 features (foot.FootRefiner)
 
     def __post_init__(self) -> None:
         if self.input_size % 32 or (self.polar_width + self.polar_overlap) % 32:
@@ -54,6 +55,8 @@ class PolarDetectorConfig(DetectorConfigRecord):
         PolarSpec(self.polar_width, self.polar_overlap, self.polar_max_theta_deg)  # checks the strip
         if not 0.0 <= self.inner_fraction < 1.0:
             raise ValueError(f"inner_fraction must lie in [0, 1), got {self.inner_fraction}")
+        if self.foot_refine and not self.foot:
+            raise ValueError("a foot refiner needs the foot output (foot)")
         if self.foot and self.inner_fraction > 0:
             raise ValueError("a foot branch and an inner-disc head are not built together")
 
@@ -122,7 +125,8 @@ def init_from_pretrained(path: str, config: YoloxSize) -> YoloxNano:
                          f"{config.num_classes} classes (a person detector has 1)")
     person = keep_classes(coco, [PERSON])
     if isinstance(config, PolarDetectorConfig) and config.foot:
-        return person.with_foot()
+        footed = person.with_foot()
+        return footed.with_foot_refiner() if config.foot_refine else footed
     if isinstance(config, PolarDetectorConfig) and config.inner_fraction > 0:
         from detector.yolox.inner_head import InnerHeadYolox
 

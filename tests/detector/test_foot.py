@@ -17,7 +17,16 @@ from detector.checkpoint import Checkpoint, ModelInfo, load_checkpoint, save_che
 from detector.data.readers import read_dataset
 from detector.metrics import EvalFrame, compute_metrics
 from detector.yolox.finetune import FinetuneConfig, Finetuner
-from detector.yolox.foot import MAX_METRES_PER_PX, foot_from_offsets, foot_loss, strip_feet
+from detector.yolox.foot import (
+    MAX_METRES_PER_PX,
+    REFINE_SIDE,
+    REFINE_STEP_PX,
+    REFINE_STRIDE,
+    FootRefiner,
+    foot_from_offsets,
+    foot_loss,
+    strip_feet,
+)
 from detector.yolox.network import YoloxNano
 from detector.yolox.polar import PolarContract, PolarDetectorConfig, init_from_pretrained
 from detector.yolox.strips import PolarStripDataset, StripAugment, collate_feet, frame_strip, training_info
@@ -170,6 +179,47 @@ def test_export_carries_the_foot_and_matches_torch(footed: YoloxNano, tmp_path: 
     centre_x = (boxes[:, 0] + boxes[:, 2]) / 2
     np.testing.assert_allclose(foot[:, 0], centre_x + 0.1 * width, atol=1e-3)
     np.testing.assert_allclose(foot[:, 1], boxes[:, 3] - 0.2 * height, atol=1e-3)
+
+
+def _coordinate_maps(height: int, width: int) -> torch.Tensor:
+    """(1, 2, h, w) stride-8 maps whose channels are each cell's centre x and y in input px."""
+    rows, cols = torch.meshgrid(torch.arange(height, dtype=torch.float32),
+                                torch.arange(width, dtype=torch.float32), indexing="ij")
+    return torch.stack([cols, rows])[None] * REFINE_STRIDE + REFINE_STRIDE / 2
+
+
+def test_the_refiner_reads_the_fine_features_about_each_point_and_starts_as_the_identity() -> None:
+    refiner = FootRefiner(width=2)
+    points = torch.tensor([[[40.0, 30.0], [101.5, 66.25]]])  # (1, K, 2) px, inside a 16 x 24 map
+    maps = _coordinate_maps(16, 24)
+    torch.testing.assert_close(refiner(maps, points), points)  # zero last layer: the coarse point
+    patches = refiner.patches(maps, points)  # (1, K, 2, S²): the cells' coordinates, interpolated
+    centre, half = (REFINE_SIDE ** 2) // 2, REFINE_STEP_PX * (REFINE_SIDE - 1) / 2
+    torch.testing.assert_close(patches[0, :, :, centre], points[0])  # the point itself
+    torch.testing.assert_close(patches[0, :, :, 0], points[0] - half)  # the patch's first corner
+    torch.testing.assert_close(patches[0, :, :, -1], points[0] + half)
+
+
+def test_export_carries_the_refined_foot_and_matches_torch(footed: YoloxNano, tmp_path: Path) -> None:
+    network = footed.with_foot_refiner()
+    assert network.foot is not None and network.foot.refiner is not None
+    with torch.no_grad():  # a refiner that moves the points by what it reads
+        torch.manual_seed(0)
+        last = network.foot.refiner.mlp[-1]
+        assert isinstance(last, torch.nn.Linear)
+        last.weight.normal_(0.0, 0.05)
+    config = dataclasses.replace(CONFIG, foot_refine=True)
+    checkpoint = Checkpoint(config, network.state_dict(), ModelInfo("refine-test", "toy", 0.3), {})
+    report = export_onnx(checkpoint, tmp_path / "refined.onnx")  # the parity check covers the foot
+    assert report.parity.frames > 0
+    plain = export_onnx(Checkpoint(CONFIG, footed.state_dict(), ModelInfo("plain", "toy", 0.3), {}),
+                        tmp_path / "plain.onnx")
+    strips = synthetic_parity_frames(64, count=1, width=288)
+    refined_raw = OnnxModel(tmp_path / "refined.onnx", SessionThreads(1)).run(strips[0])
+    plain_raw = OnnxModel(plain.output, SessionThreads(1)).run(strips[0])
+    np.testing.assert_allclose(refined_raw.boxes, plain_raw.boxes, atol=1e-4)  # boxes untouched
+    assert refined_raw.foot is not None and plain_raw.foot is not None
+    assert np.abs(refined_raw.foot - plain_raw.foot).max() > 0.01  # the refiner moved the feet
 
 
 def test_cli_adds_the_foot_to_a_polar_checkpoint(
