@@ -71,6 +71,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     polar.add_argument("--foot-refine", action="store_true",
                        help="add the foot output's second stage (stride-8 features read about each "
                             "coarse foot point; detector.yolox.foot.FootRefiner); implies --foot")
+    polar.add_argument("--foot-refine-steps", type=int, default=None, metavar="N",
+                       help="passes of the foot refiner (default: the checkpoint's, else 1)")
     polar.add_argument("--view", choices=("polar", "fisheye"), default=None,
                        help="what the YOLOX reads: the polar unwrap (default) or the letterboxed frame "
                             "with a radius-aligned head (--input-size, default 640)")
@@ -164,7 +166,8 @@ def initial_network(args: argparse.Namespace, model_config: YoloxDetectorConfig
         if args.foot or args.foot_refine:
             if not isinstance(model_config, PolarDetectorConfig):
                 raise ValueError("--foot is an option of the polar view")
-            model_config = replace(model_config, foot=True, foot_refine=bool(args.foot_refine))
+            model_config = replace(model_config, foot=True, foot_refine=bool(args.foot_refine),
+                                   foot_refine_steps=args.foot_refine_steps or 1)
         return model_config, init_from_pretrained(args.init_from, model_config)
     checkpoint = load_checkpoint(args.init_from)
     if not isinstance(checkpoint.config, PolarDetectorConfig):
@@ -181,6 +184,11 @@ def initial_network(args: argparse.Namespace, model_config: YoloxDetectorConfig
         model_config, network = replace(model_config, foot=True), network.with_foot()
     if args.foot_refine and not model_config.foot_refine:
         model_config, network = replace(model_config, foot_refine=True), network.with_foot_refiner()
+    if args.foot_refine_steps is not None and args.foot_refine_steps != model_config.foot_refine_steps:
+        if not model_config.foot_refine:
+            raise ValueError("--foot-refine-steps needs a foot refiner (--foot-refine)")
+        model_config = replace(model_config, foot_refine_steps=args.foot_refine_steps)
+        network = network.with_foot_refine_steps(args.foot_refine_steps)
     return model_config, network
 
 

@@ -236,9 +236,9 @@ class Finetuner:
         feet = collate_feet(samples) if self.model.foot is not None else None
         if feet is not None:
             maps, offsets, fine = self.model.forward_with_foot(images)
-            refiner = self.model.foot.refiner if self.model.foot is not None else None
-            terms = self.loss(maps, labels, teacher_maps, offsets, feet,
-                              (fine, refiner) if refiner is not None else None)
+            foot = self.model.foot
+            refine = (fine, foot.refiner, foot.refine_steps) if foot is not None and foot.refiner else None
+            terms = self.loss(maps, labels, teacher_maps, offsets, feet, refine)
         else:
             terms = self.loss(self.model(images), labels, teacher_maps)
         self.optimizer.zero_grad(set_to_none=True)

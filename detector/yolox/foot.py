@@ -48,9 +48,11 @@ REFINE_SCALE_PX = 8.0  # strip px per unit of its output
 class FootHead(nn.Module):
     """The head's stem outputs of the 3 levels (B, width, h_i, w_i) -> offsets (B, 2, h_i, w_i)."""
 
-    def __init__(self, width: int, levels: int, depthwise: bool, refine: bool = False) -> None:
+    def __init__(self, width: int, levels: int, depthwise: bool, refine: bool = False,
+                 refine_steps: int = 1) -> None:
         super().__init__()
         self.refiner = FootRefiner(width) if refine else None
+        self.refine_steps = refine_steps
         self.convs = nn.ModuleList([nn.Sequential(conv_block(width, width, 3, 1, depthwise),
                                                   conv_block(width, width, 3, 1, depthwise))
                                     for _ in range(levels)])
@@ -64,8 +66,11 @@ class FootHead(nn.Module):
         return [pred(conv(x)) for x, conv, pred in zip(stem_features, self.convs, self.preds, strict=True)]
 
     def refine(self, fine_features: Tensor, points: Tensor) -> Tensor:
-        """(B, K, 2) coarse foot points -> the refiner's (the same points without one)."""
-        return points if self.refiner is None else self.refiner(fine_features, points)
+        """(B, K, 2) coarse foot points -> the refiner's after its `refine_steps` passes (the same
+        points without one)."""
+        if self.refiner is None:
+            return points
+        return refinement_steps(self.refiner, fine_features, points, self.refine_steps)[-1]
 
 
 class FootRefiner(nn.Module):
@@ -106,9 +111,21 @@ class FootRefiner(nn.Module):
         return points + self.mlp(flat) * REFINE_SCALE_PX
 
 
-def refine_points(refiner: FootRefiner, fine_features: Tensor, points: Tensor) -> Tensor:
-    """(P, 2) coarse points of one image with its (1, C, h, w) stride-8 features -> refined (P, 2)."""
-    return refiner(fine_features, points[None])[0]
+def refinement_steps(refiner: FootRefiner, fine_features: Tensor, points: Tensor, steps: int
+                     ) -> list[Tensor]:
+    """(B, K, 2) coarse points -> the points after each of `steps` passes of the refiner, each pass
+    reading the patch about the previous one's answer."""
+    passes = []
+    for _ in range(steps):
+        points = refiner(fine_features, points)
+        passes.append(points)
+    return passes
+
+
+def refine_points(refiner: FootRefiner, steps: int, fine_features: Tensor, points: Tensor) -> list[Tensor]:
+    """(P, 2) coarse points of one image with its (1, C, h, w) stride-8 features -> the (P, 2)
+    points after each pass."""
+    return [p[0] for p in refinement_steps(refiner, fine_features, points[None], steps)]
 
 
 def foot_from_offsets(offsets: Tensor, cxcywh: Tensor) -> Tensor:
@@ -119,9 +136,9 @@ def foot_from_offsets(offsets: Tensor, cxcywh: Tensor) -> Tensor:
 
 
 def foot_loss(offsets: Tensor, boxes_xyxy: Tensor, targets: Tensor,
-              refine: Callable[[Tensor], Tensor] | None = None) -> tuple[Tensor, int]:
+              refine: Callable[[Tensor], list[Tensor]] | None = None) -> tuple[Tensor, int]:
     """Sum over positives of metres-weighted L1 and their count (with `refine`, a map of (V, 2)
-    coarse points to refined ones, the mean of the coarse and the refined points' losses).
+    coarse points to the refiner's after each pass, the mean of the coarse and every pass's loss).
 
     offsets (P, 2) predicted a, b; boxes_xyxy (P, 4) the cells' decoded boxes (the foot is read off
     the box the model itself predicts, as at inference); targets (P, 3) foot x, y (px) and metres
@@ -135,7 +152,10 @@ def foot_loss(offsets: Tensor, boxes_xyxy: Tensor, targets: Tensor,
     weight = targets[valid, 2].clamp(max=MAX_METRES_PER_PX)
     error = (predicted - targets[valid, :2]).abs().sum(dim=1)  # (V,) px
     if refine is not None:
-        error = (error + (refine(predicted) - targets[valid, :2]).abs().sum(dim=1)) / 2
+        passes = refine(predicted)
+        for refined in passes:
+            error = error + (refined - targets[valid, :2]).abs().sum(dim=1)
+        error = error / (1 + len(passes))
     return (error * weight).sum(), int(valid.sum())
 
 

@@ -146,7 +146,7 @@ class PolarDetectionLoss:
     def __call__(self, maps: Sequence[Tensor], labels_xyxy: Sequence[Tensor],
                  teacher_maps: Sequence[Tensor] | None = None, foot_offsets: Sequence[Tensor] | None = None,
                  feet: Sequence[Tensor] | None = None,
-                 refine: tuple[Tensor, FootRefiner] | None = None) -> dict[str, Tensor]:
+                 refine: tuple[Tensor, FootRefiner, int] | None = None) -> dict[str, Tensor]:
         """`foot_offsets` the foot branch's maps and `feet` (N_i, 3) per image (targets of
         `detector.yolox.foot.foot_loss`) add the `foot` term; both or neither."""
         if (foot_offsets is None) != (feet is None):
@@ -183,8 +183,8 @@ class PolarDetectionLoss:
                 flat[b, fg, CLASSES_START], class_target, reduction="sum")
             if offsets is not None and feet is not None:
                 targets = feet[b].to(flat.device, flat.dtype)[owner[fg]]  # (P, 3)
-                image_refine = (None if refine is None
-                                else functools.partial(refine_points, refine[1], refine[0][b:b + 1]))
+                image_refine = (None if refine is None else functools.partial(
+                    refine_points, refine[1], refine[2], refine[0][b:b + 1]))
                 image_sum, image_count = foot_loss(offsets[b, fg], boxes[b, fg], targets, image_refine)
                 foot_sum, foot_count = foot_sum + image_sum, foot_count + image_count
         norm = float(max(positives, 1))

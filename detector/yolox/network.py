@@ -37,6 +37,7 @@ class YoloxConfig:
     model_name: str = "yolox-nano"
     foot: bool = False  # a foot branch on the box branch (detector.yolox.foot)
     foot_refine: bool = False  # and its second stage on the stride-8 features (FootRefiner)
+    foot_refine_steps: int = 1  # passes of that stage, each about the previous one's point
 
     def __post_init__(self) -> None:
         if self.num_classes < 1:
@@ -79,8 +80,8 @@ class YoloxNano(nn.Module):
         self.neck = PAFPN(config.level_channels, config.neck_depth, config.depthwise)
         self.head = YoloxHead(config.num_classes, config.level_channels, config.head_width,
                               config.depthwise, config.prior_prob)
-        self.foot = (FootHead(config.head_width, len(STRIDES), config.depthwise, config.foot_refine)
-                     if config.foot else None)
+        self.foot = (FootHead(config.head_width, len(STRIDES), config.depthwise, config.foot_refine,
+                              config.foot_refine_steps) if config.foot else None)
 
     def forward(self, images: Tensor) -> list[Tensor]:
         features = self.backbone(images)  # strides 8, 16, 32
@@ -121,6 +122,13 @@ class YoloxNano(nn.Module):
         device = next(self.parameters()).device
         return footed.to(device).train(self.training)
 
+    def with_foot_refine_steps(self, steps: int) -> YoloxNano:
+        """A copy whose foot refiner runs `steps` passes; every weight unchanged."""
+        stepped = YoloxNano(replace(self.config, foot_refine_steps=steps))
+        stepped.load_state_dict(self.state_dict(), strict=True)
+        device = next(self.parameters()).device
+        return stepped.to(device).train(self.training)
+
     def to_person_only(self) -> YoloxNano:
         """A copy that predicts COCO's person class alone (C = 1), e.g. to fine-tune and export."""
         return keep_classes(self, [PERSON])
@@ -155,7 +163,8 @@ class DetectorConfigRecord:
     def yolox(self) -> YoloxConfig:
         return YoloxConfig(num_classes=self.num_classes, depth=self.depth, width=self.width,
                            foot=bool(getattr(self, "foot", False)),
-                           foot_refine=bool(getattr(self, "foot_refine", False)))
+                           foot_refine=bool(getattr(self, "foot_refine", False)),
+                           foot_refine_steps=int(getattr(self, "foot_refine_steps", 1)))
 
     def to_dict(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in fields(self)}  # type: ignore[arg-type]

@@ -200,6 +200,24 @@ def test_the_refiner_reads_the_fine_features_about_each_point_and_starts_as_the_
     torch.testing.assert_close(patches[0, :, :, -1], points[0] + half)
 
 
+def test_refiner_passes_each_read_the_patch_about_the_previous_answer() -> None:
+    from detector.yolox.foot import FootHead
+
+    head = FootHead(width=2, levels=3, depthwise=True, refine=True, refine_steps=2)
+    assert head.refiner is not None
+    with torch.no_grad():
+        torch.manual_seed(1)
+        for layer in head.refiner.mlp:
+            if isinstance(layer, torch.nn.Linear):
+                layer.weight.normal_(0.0, 0.05)
+    maps, points = _coordinate_maps(16, 24), torch.tensor([[[40.0, 30.0], [101.5, 66.25]]])
+    once = head.refiner(maps, points)
+    assert not torch.allclose(once, points)
+    torch.testing.assert_close(head.refine(maps, points), head.refiner(maps, once))
+    with pytest.raises(ValueError, match="foot_refine_steps"):
+        dataclasses.replace(CONFIG, foot_refine=True, foot_refine_steps=0)
+
+
 def test_export_carries_the_refined_foot_and_matches_torch(footed: YoloxNano, tmp_path: Path) -> None:
     network = footed.with_foot_refiner()
     assert network.foot is not None and network.foot.refiner is not None
