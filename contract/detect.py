@@ -113,6 +113,15 @@ def reduce_like_decode(rgb: NDArray[np.uint8], min_long_side: int) -> NDArray[np
     return rgb
 
 
+@dataclass(frozen=True)
+class FrameOutputs:
+    """One frame's raw model outputs and how they map back to it."""
+
+    raw: RawOutputs
+    mapping: InputMapping
+    principal_point: tuple[float, float]
+
+
 class ContractModel(Protocol):
     """What runs a model of the contract: an `OnnxModel`, or a torch module wrapped alike."""
 
@@ -134,15 +143,27 @@ class ModelRunner:
     def default_min_score(self) -> float:
         return self.model.info.default_min_score
 
-    def detect(self, frames_rgb: Sequence[NDArray[np.uint8]], cameras: Sequence[FisheyeCamera],
-               min_score: float) -> list[FrameDetections]:
-        """Frames (H, W, 3) uint8 RGB and each one's camera (at the frame's size) -> detections."""
+    def outputs(self, frames_rgb: Sequence[NDArray[np.uint8]], cameras: Sequence[FisheyeCamera]
+                ) -> list[FrameOutputs]:
+        """Frames (H, W, 3) uint8 RGB and each one's camera (at the frame's size) -> the model's raw
+        outputs, from the input the service would make of each (reduced decode, the model's view)."""
         info = self.model.info
         found = []
         for rgb, camera in zip(frames_rgb, cameras, strict=True):
             reduced = reduce_like_decode(rgb, min_decoded_side(info, camera))
             image, mapping = prepare_input(info, reduced, camera)
-            raw = self.model.run(image)
             pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
-            found.append(select_detections(raw, mapping, pp, min_score, self.nms_iou, self.max_detections))
+            found.append(FrameOutputs(self.model.run(image), mapping, pp))
         return found
+
+    def select(self, outputs: Sequence[FrameOutputs], min_score: float, nms_iou: float | None = None
+               ) -> list[FrameDetections]:
+        """Raw outputs -> detections at `min_score` and `nms_iou` (default: this runner's)."""
+        iou = self.nms_iou if nms_iou is None else nms_iou
+        return [select_detections(o.raw, o.mapping, o.principal_point, min_score, iou, self.max_detections)
+                for o in outputs]
+
+    def detect(self, frames_rgb: Sequence[NDArray[np.uint8]], cameras: Sequence[FisheyeCamera],
+               min_score: float) -> list[FrameDetections]:
+        """Frames (H, W, 3) uint8 RGB and each one's camera (at the frame's size) -> detections."""
+        return self.select(self.outputs(frames_rgb, cameras), min_score)

@@ -52,8 +52,6 @@ from detector.operating_point import (
     OperatingPoint,
     choose,
     describe,
-    detections_at,
-    model_outputs,
     sweep,
 )
 from detector.plots import plot_pe_by_distance, plot_pr_curve
@@ -161,17 +159,18 @@ def choose_operating_point(model: ContractModel, frames: Sequence[FrameAnnotatio
                            ) -> tuple[OperatingPoint, Evaluation, list[OperatingPoint]]:
     """The best-F1 (NMS IoU, threshold) of `model` on validation `frames` (`detector.operating_point`),
     the evaluation there (its metrics with `min_score` and `nms_iou`), and every IoU's point."""
-    outputs = model_outputs(model, frames, [frame_camera(f) for f in frames])
+    runner = ModelRunner(model)
+    outputs = runner.outputs([load_rgb(f) for f in frames], [frame_camera(f) for f in frames])
 
     def frames_at(nms_iou: float) -> list[EvalFrame]:
-        found = detections_at(outputs, EVAL_MIN_SCORE, nms_iou)
+        found = runner.select(outputs, EVAL_MIN_SCORE, nms_iou)
         return [eval_frame(frame, detections) for frame, detections in zip(frames, found, strict=True)]
 
-    points = sweep(frames_at, grid)
-    best = choose([point for point, _ in points])
-    evaluated = next(frames for point, frames in points if point == best)
+    swept = sweep(frames_at, grid)
+    points = [point for point, _ in swept]
+    best, evaluated = swept[choose(points)]
     metrics = {**summarise(evaluated, best.min_score), "nms_iou": best.nms_iou}
-    return best, Evaluation(evaluated, metrics), [p for p, _ in points]
+    return best, Evaluation(evaluated, metrics), points
 
 
 def summarise(frames: Sequence[EvalFrame], min_score: float) -> dict[str, Any]:

@@ -21,11 +21,6 @@ from typing import Any
 
 import numpy as np
 
-from contract import FrameDetections, ModelInfo, RawOutputs, reduce_like_decode, select_detections
-from contract.detect import ContractModel
-from contract.views import InputMapping, min_decoded_side, prepare_input
-from detector.data.dataset import load_rgb
-from detector.data.readers import FrameAnnotations
 from detector.metrics import EvalFrame, compute_metrics, pr_curve
 
 NMS_GRID = (0.25, 0.3, 0.35, 0.4, 0.45, 0.5, 0.55, 0.6, 0.65)
@@ -43,15 +38,6 @@ class OperatingPoint:
     ap50: float
 
 
-@dataclass(frozen=True)
-class FrameOutputs:
-    """One frame's raw model outputs and how they map back to it."""
-
-    raw: RawOutputs
-    mapping: InputMapping
-    principal_point: tuple[float, float]
-
-
 def best_f1_threshold(frames: Sequence[EvalFrame]) -> float:
     """The score threshold of best F1 at IoU 0.5 (clamped to `THRESHOLD_RANGE`)."""
     precision, recall, scores = pr_curve(frames)
@@ -59,24 +45,6 @@ def best_f1_threshold(frames: Sequence[EvalFrame]) -> float:
         return NO_DETECTIONS_THRESHOLD
     f1 = 2 * precision * recall / np.maximum(precision + recall, 1e-9)
     return float(np.clip(scores[int(np.argmax(f1))], *THRESHOLD_RANGE))
-
-
-def model_outputs(model: ContractModel, frames: Sequence[FrameAnnotations], cameras: Sequence[Any]
-                  ) -> list[FrameOutputs]:
-    """Run the model once per frame as the service would (reduced decode, the model's view)."""
-    info: ModelInfo = model.info
-    outputs = []
-    for frame, camera in zip(frames, cameras, strict=True):
-        reduced = reduce_like_decode(load_rgb(frame), min_decoded_side(info, camera))
-        image, mapping = prepare_input(info, reduced, camera)
-        pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
-        outputs.append(FrameOutputs(model.run(image), mapping, pp))
-    return outputs
-
-
-def detections_at(outputs: Sequence[FrameOutputs], min_score: float, nms_iou: float | None
-                  ) -> list[FrameDetections]:
-    return [select_detections(o.raw, o.mapping, o.principal_point, min_score, nms_iou) for o in outputs]
 
 
 def sweep(frames_at: Any, grid: Sequence[float] = NMS_GRID) -> list[tuple[OperatingPoint, list[EvalFrame]]]:
@@ -93,9 +61,9 @@ def sweep(frames_at: Any, grid: Sequence[float] = NMS_GRID) -> list[tuple[Operat
     return points
 
 
-def choose(points: Sequence[OperatingPoint]) -> OperatingPoint:
-    """The point of highest F1 (the first of the grid on a tie)."""
-    return max(points, key=lambda p: (p.f1, -points.index(p)))
+def choose(points: Sequence[OperatingPoint]) -> int:
+    """The index of the point of highest F1 (the first of the grid on a tie)."""
+    return int(np.argmax([point.f1 for point in points]))
 
 
 def describe(points: Sequence[OperatingPoint]) -> list[dict[str, Any]]:

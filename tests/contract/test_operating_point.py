@@ -77,6 +77,6 @@ def test_the_operating_point_is_the_nms_iou_and_threshold_of_best_f1() -> None:
                 _frame([shifted, person] if duplicate else [person], [0.9, 0.6] if duplicate else [0.6])]
 
     points = [point for point, _ in sweep(frames_at, (0.3, 0.45, 0.6))]
-    best = choose(points)
+    best = points[choose(points)]
     assert best.nms_iou == 0.3 and best.f1 == pytest.approx(1.0) and best.min_score == pytest.approx(0.6)
     assert all(point.f1 < 1.0 for point in points if point.nms_iou >= 0.4)
