@@ -71,6 +71,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     polar.add_argument("--foot-refine", action="store_true",
                        help="add the foot output's second stage (stride-8 features read about each "
                             "coarse foot point; detector.yolox.foot.FootRefiner); implies --foot")
+    polar.add_argument("--foot-neck", action="store_true",
+                       help="give the foot output its own copy of the neck, started from the "
+                            "detector's and trained on the foot loss alone (detector.yolox.foot.FootNeck); "
+                            "implies --foot")
     polar.add_argument("--foot-refine-steps", type=int, default=None, metavar="N",
                        help="passes of the foot refiner (default: the checkpoint's, else 1)")
     polar.add_argument("--view", choices=("polar", "fisheye"), default=None,
@@ -163,11 +167,12 @@ def initial_network(args: argparse.Namespace, model_config: YoloxDetectorConfig
     """The network `--init-from` starts from and its config: the COCO ONNX's person network in
     `model_config`, or a polar checkpoint's own network and strip; `--foot` adds the foot branch."""
     if Path(args.init_from).suffix.lower() != ".pt":
-        if args.foot or args.foot_refine:
+        if args.foot or args.foot_refine or args.foot_neck:
             if not isinstance(model_config, PolarDetectorConfig):
                 raise ValueError("--foot is an option of the polar view")
             model_config = replace(model_config, foot=True, foot_refine=bool(args.foot_refine),
-                                   foot_refine_steps=args.foot_refine_steps or 1)
+                                   foot_refine_steps=args.foot_refine_steps or 1,
+                                   foot_neck=bool(args.foot_neck))
         return model_config, init_from_pretrained(args.init_from, model_config)
     checkpoint = load_checkpoint(args.init_from)
     if not isinstance(checkpoint.config, PolarDetectorConfig):
@@ -180,7 +185,7 @@ def initial_network(args: argparse.Namespace, model_config: YoloxDetectorConfig
     if not isinstance(network, YoloxNano):
         raise ValueError(f"{args.init_from} holds no YOLOX network")
     model_config = checkpoint.config
-    if (args.foot or args.foot_refine) and not model_config.foot:
+    if (args.foot or args.foot_refine or args.foot_neck) and not model_config.foot:
         model_config, network = replace(model_config, foot=True), network.with_foot()
     if args.foot_refine and not model_config.foot_refine:
         model_config, network = replace(model_config, foot_refine=True), network.with_foot_refiner()
@@ -189,6 +194,8 @@ def initial_network(args: argparse.Namespace, model_config: YoloxDetectorConfig
             raise ValueError("--foot-refine-steps needs a foot refiner (--foot-refine)")
         model_config = replace(model_config, foot_refine_steps=args.foot_refine_steps)
         network = network.with_foot_refine_steps(args.foot_refine_steps)
+    if args.foot_neck and not model_config.foot_neck:
+        model_config, network = replace(model_config, foot_neck=True), network.with_foot_neck()
     return model_config, network
 
 

@@ -45,12 +45,29 @@ REFINE_STEP_PX = 4.0  # strip px between two samples (half a stride-8 cell)
 REFINE_SCALE_PX = 8.0  # strip px per unit of its output
 
 
+class FootNeck(nn.Module):
+    """The foot's own copy of the neck and the head's stems: backbone features (strides 8, 16,
+    32) -> (B, width, h_i, w_i) per level, what the foot branch reads in place of the head's stem
+    outputs. The detector's features were learnt for boxes and stay frozen so that its boxes stay
+    the shipped ones; this copy, started from them, learns for the foot loss alone."""
+
+    def __init__(self, neck: nn.Module, stems: nn.ModuleList) -> None:
+        super().__init__()
+        self.neck = neck
+        self.stems = stems
+
+    def forward(self, features: Sequence[Tensor]) -> list[Tensor]:
+        return [stem(x) for x, stem in zip(self.neck(features), self.stems, strict=True)]
+
+
 class FootHead(nn.Module):
-    """The head's stem outputs of the 3 levels (B, width, h_i, w_i) -> offsets (B, 2, h_i, w_i)."""
+    """The head's stem outputs of the 3 levels (B, width, h_i, w_i) -> offsets (B, 2, h_i, w_i);
+    with a `FootNeck` (`features`), that neck's outputs in their place."""
 
     def __init__(self, width: int, levels: int, depthwise: bool, refine: bool = False,
-                 refine_steps: int = 1) -> None:
+                 refine_steps: int = 1, features: FootNeck | None = None) -> None:
         super().__init__()
+        self.features = features
         self.refiner = FootRefiner(width) if refine else None
         self.refine_steps = refine_steps
         self.convs = nn.ModuleList([nn.Sequential(conv_block(width, width, 3, 1, depthwise),

@@ -17,7 +17,8 @@ import torch
 from torch import Tensor, nn
 
 from detector.yolox.backbone import CSPDarknet
-from detector.yolox.foot import FootHead
+from detector.yolox.blocks import BaseConv
+from detector.yolox.foot import FootHead, FootNeck
 from detector.yolox.head import YoloxHead
 from detector.yolox.neck import PAFPN
 
@@ -38,6 +39,7 @@ class YoloxConfig:
     foot: bool = False  # a foot branch on the box branch (detector.yolox.foot)
     foot_refine: bool = False  # and its second stage on the stride-8 features (FootRefiner)
     foot_refine_steps: int = 1  # passes of that stage, each about the previous one's point
+    foot_neck: bool = False  # the foot branch reads its own copy of the neck (FootNeck)
 
     def __post_init__(self) -> None:
         if self.num_classes < 1:
@@ -81,7 +83,13 @@ class YoloxNano(nn.Module):
         self.head = YoloxHead(config.num_classes, config.level_channels, config.head_width,
                               config.depthwise, config.prior_prob)
         self.foot = (FootHead(config.head_width, len(STRIDES), config.depthwise, config.foot_refine,
-                              config.foot_refine_steps) if config.foot else None)
+                              config.foot_refine_steps, self._foot_neck(config) if config.foot_neck else None)
+                     if config.foot else None)
+
+    @staticmethod
+    def _foot_neck(config: YoloxConfig) -> FootNeck:
+        return FootNeck(PAFPN(config.level_channels, config.neck_depth, config.depthwise),
+                        nn.ModuleList([BaseConv(c, config.head_width, 1) for c in config.level_channels]))
 
     def forward(self, images: Tensor) -> list[Tensor]:
         features = self.backbone(images)  # strides 8, 16, 32
@@ -94,7 +102,10 @@ class YoloxNano(nn.Module):
         the foot's refiner reads (a network with a foot branch)."""
         if self.foot is None:
             raise ValueError("this network has no foot branch (YoloxConfig.foot)")
-        maps, stem_features = self.head.forward_features(self.neck(self.backbone(images)))
+        levels = self.backbone(images)
+        maps, stem_features = self.head.forward_features(self.neck(levels))
+        if self.foot.features is not None:
+            stem_features = self.foot.features(levels)
         offsets: list[Tensor] = self.foot(stem_features)
         return maps, offsets, stem_features[0]
 
@@ -121,6 +132,21 @@ class YoloxNano(nn.Module):
             foot_convs.load_state_dict(box_convs.state_dict())
         device = next(self.parameters()).device
         return footed.to(device).train(self.training)
+
+    def with_foot_neck(self) -> YoloxNano:
+        """A copy whose foot branch reads its own neck (`FootNeck`), started as a copy of the
+        detector's neck and stems, so that it answers as before until trained; all else unchanged."""
+        if self.foot is None:
+            raise ValueError("a foot neck needs a foot branch (YoloxConfig.foot)")
+        necked = YoloxNano(replace(self.config, foot_neck=True))
+        missing, unexpected = necked.load_state_dict(self.state_dict(), strict=False)
+        if unexpected or not all(key.startswith("foot.features.") for key in missing):
+            raise ValueError(f"with_foot_neck: unexpected weights {unexpected}, missing {missing}")
+        assert necked.foot is not None and necked.foot.features is not None
+        necked.foot.features.neck.load_state_dict(self.neck.state_dict())
+        necked.foot.features.stems.load_state_dict(self.head.stems.state_dict())
+        device = next(self.parameters()).device
+        return necked.to(device).train(self.training)
 
     def with_foot_refine_steps(self, steps: int) -> YoloxNano:
         """A copy whose foot refiner runs `steps` passes; every weight unchanged."""
@@ -164,7 +190,8 @@ class DetectorConfigRecord:
         return YoloxConfig(num_classes=self.num_classes, depth=self.depth, width=self.width,
                            foot=bool(getattr(self, "foot", False)),
                            foot_refine=bool(getattr(self, "foot_refine", False)),
-                           foot_refine_steps=int(getattr(self, "foot_refine_steps", 1)))
+                           foot_refine_steps=int(getattr(self, "foot_refine_steps", 1)),
+                           foot_neck=bool(getattr(self, "foot_neck", False)))
 
     def to_dict(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in fields(self)}  # type: ignore[arg-type]

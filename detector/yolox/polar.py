@@ -46,6 +46,7 @@ class PolarDetectorConfig(DetectorConfigRecord):
     foot: bool = False  # a foot output: each box's floor-contact point (detector.yolox.foot)
     foot_refine: bool = False  # its second stage on the stride-8 features (foot.FootRefiner)
     foot_refine_steps: int = 1  # passes of that stage
+    foot_neck: bool = False  # the foot reads its own copy of the neck (foot.FootNeck)
 
     def __post_init__(self) -> None:
         if self.input_size % 32 or (self.polar_width + self.polar_overlap) % 32:
@@ -56,8 +57,8 @@ class PolarDetectorConfig(DetectorConfigRecord):
         PolarSpec(self.polar_width, self.polar_overlap, self.polar_max_theta_deg)  # checks the strip
         if not 0.0 <= self.inner_fraction < 1.0:
             raise ValueError(f"inner_fraction must lie in [0, 1), got {self.inner_fraction}")
-        if self.foot_refine and not self.foot:
-            raise ValueError("a foot refiner needs the foot output (foot)")
+        if (self.foot_refine or self.foot_neck) and not self.foot:
+            raise ValueError("a foot refiner or neck needs the foot output (foot)")
         if not 1 <= self.foot_refine_steps <= 4:
             raise ValueError(f"foot_refine_steps must lie in [1, 4], got {self.foot_refine_steps}")
         if self.foot and self.inner_fraction > 0:
@@ -129,9 +130,9 @@ def init_from_pretrained(path: str, config: YoloxSize) -> YoloxNano:
     person = keep_classes(coco, [PERSON])
     if isinstance(config, PolarDetectorConfig) and config.foot:
         footed = person.with_foot()
-        if not config.foot_refine:
-            return footed
-        return footed.with_foot_refiner().with_foot_refine_steps(config.foot_refine_steps)
+        if config.foot_refine:
+            footed = footed.with_foot_refiner().with_foot_refine_steps(config.foot_refine_steps)
+        return footed.with_foot_neck() if config.foot_neck else footed
     if isinstance(config, PolarDetectorConfig) and config.inner_fraction > 0:
         from detector.yolox.inner_head import InnerHeadYolox
 

@@ -219,14 +219,16 @@ def test_refiner_passes_each_read_the_patch_about_the_previous_answer() -> None:
 
 
 def test_export_carries_the_refined_foot_and_matches_torch(footed: YoloxNano, tmp_path: Path) -> None:
-    network = footed.with_foot_refiner()
-    assert network.foot is not None and network.foot.refiner is not None
-    with torch.no_grad():  # a refiner that moves the points by what it reads
+    network = footed.with_foot_refiner().with_foot_neck()
+    assert network.foot is not None and network.foot.refiner is not None and network.foot.features
+    with torch.no_grad():  # a refiner that moves the points by what it reads, a neck of its own
         torch.manual_seed(0)
         last = network.foot.refiner.mlp[-1]
         assert isinstance(last, torch.nn.Linear)
         last.weight.normal_(0.0, 0.05)
-    config = dataclasses.replace(CONFIG, foot_refine=True)
+        for parameter in network.foot.features.parameters():
+            parameter.mul_(1.1)
+    config = dataclasses.replace(CONFIG, foot_refine=True, foot_neck=True)
     checkpoint = Checkpoint(config, network.state_dict(), ModelInfo("refine-test", "toy", 0.3), {})
     report = export_onnx(checkpoint, tmp_path / "refined.onnx")  # the parity check covers the foot
     assert report.parity.frames > 0
@@ -258,6 +260,36 @@ def test_cli_adds_the_foot_to_a_polar_checkpoint(
         assert torch.equal(trained.model_state[key], value), key
     assert main([*args[:1], "--init-from", str(start), "--strip", "64", "256", "32", *args[4:]]) == 2
     assert "fixes the view and strip" in capsys.readouterr().err
+
+
+def test_a_foot_neck_starts_as_the_detectors_and_trains_alone(
+        footed: YoloxNano, toy_dataset: Callable[..., Path], tmp_path: Path) -> None:
+    network = footed.with_foot_refiner().with_foot_neck()
+    assert network.foot is not None and network.foot.features is not None
+    strips = torch.from_numpy(synthetic_parity_frames(64, count=2, width=288))
+    with torch.no_grad():  # a copy of the neck and stems: the same foot points as without it
+        before = PolarContract(footed.with_foot_refiner(), 50)(strips)
+        after = PolarContract(network, 50)(strips)
+    for old, new in zip(before, after, strict=True):
+        torch.testing.assert_close(new, old)
+    start = tmp_path / "start.pt"
+    save_checkpoint(start, Checkpoint(CONFIG, footed.state_dict(), ModelInfo("s", "toy", 0.4), {}))
+    out = tmp_path / "neck"
+    data = toy_dataset(count=2, size=128, people=2)
+    assert main(["train", "--init-from", str(start), "--foot-neck", "--data", str(data), "--out", str(out),
+                 "--quiet", "--threads", "1", "--epochs", "1", "--batch-size", "2", "--distill", "0",
+                 "--lr", "0.01", "--freeze", *FROZEN]) == 0
+    trained = load_checkpoint(out / "last.pt")
+    assert trained.config == dataclasses.replace(CONFIG, foot_neck=True)
+    neck_keys = [key for key in trained.model_state if key.startswith("foot.features.neck.")]
+    assert neck_keys and any(not torch.equal(trained.model_state[key],  # the copy learnt
+                                             footed.state_dict()[key.removeprefix("foot.features.")])
+                             for key in neck_keys)
+    for key, value in footed.state_dict().items():  # the detector's own neck did not
+        if not key.startswith("foot."):
+            assert torch.equal(trained.model_state[key], value), key
+    with pytest.raises(ValueError, match="refiner or neck needs"):
+        dataclasses.replace(CONFIG, foot=False, foot_neck=True)
 
 
 def test_metrics_place_people_by_the_predicted_foot() -> None:
