@@ -13,6 +13,12 @@ In the polar strip the bottom side is the one nearest the principal point (radiu
 so `a = b = 0` is exactly the box-side foot point; the branch's last convolution starts at zero, so
 an untrained branch answers what the box side answers.
 
+Two later parts read finer or better-suited features: `FootRefiner` corrects each coarse point from
+the stride-8 features sampled about it, and `FootNeck` gives the branch its own copy of the neck
+and stems, so that the features it reads learn for the foot while the detector's, which the boxes
+read, stay frozen (the frozen features were learnt for boxes: on them the branch fitted the
+training renders no better than the validation ones).
+
 Training targets come from the renders' `location_m`, projected into the frame by the camera and
 into the strip by the polar grid (`strip_feet`). The loss is L1 in strip pixels times the metres
 one strip row spans at the target (`metres_per_px`), so far people, with few pixels per metre,
