@@ -98,8 +98,9 @@ class YoloxNano(nn.Module):
         return maps
 
     def forward_with_foot(self, images: Tensor) -> tuple[list[Tensor], list[Tensor], Tensor]:
-        """The maps, the foot offsets (B, 2, H/s, W/s) per stride s and the stride-8 stem output
-        the foot's refiner reads (a network with a foot branch)."""
+        """The maps, the foot offsets (B, 2, H/s, W/s) per stride s and the stride-8 features the
+        foot's refiner reads: the head's stem output, or its `FootNeck`'s where it has one (a
+        network with a foot branch)."""
         if self.foot is None:
             raise ValueError("this network has no foot branch (YoloxConfig.foot)")
         levels = self.backbone(images)
@@ -109,51 +110,45 @@ class YoloxNano(nn.Module):
         offsets: list[Tensor] = self.foot(stem_features)
         return maps, offsets, stem_features[0]
 
+    def _grown(self, new_weights: str | None, **changes: Any) -> YoloxNano:
+        """A copy built with `changes` to the config, every weight copied but the new ones (all
+        named `new_weights`...; None: no new one), which start as built; on this network's device,
+        in its mode."""
+        grown = YoloxNano(replace(self.config, **changes))
+        missing, unexpected = grown.load_state_dict(self.state_dict(), strict=False)
+        if unexpected or any(new_weights is None or not key.startswith(new_weights) for key in missing):
+            raise ValueError(f"{changes}: unexpected weights {unexpected}, missing {missing}")
+        return grown.to(next(self.parameters()).device).train(self.training)
+
     def with_foot_refiner(self) -> YoloxNano:
         """A copy whose foot branch has a new (untrained, identity) refiner; all else unchanged."""
         if self.foot is None:
             raise ValueError("a foot refiner needs a foot branch (YoloxConfig.foot)")
-        refined = YoloxNano(replace(self.config, foot_refine=True))
-        missing, unexpected = refined.load_state_dict(self.state_dict(), strict=False)
-        if unexpected or not all(key.startswith("foot.refiner.") for key in missing):
-            raise ValueError(f"with_foot_refiner: unexpected weights {unexpected}, missing {missing}")
-        device = next(self.parameters()).device
-        return refined.to(device).train(self.training)
+        return self._grown("foot.refiner.", foot_refine=True)
 
     def with_foot(self) -> YoloxNano:
         """A copy with a new foot branch (its convolutions a copy of the box branch's, its offsets
         zero: the box-side foot point until trained); every other weight is copied unchanged."""
-        footed = YoloxNano(replace(self.config, foot=True))
-        missing, unexpected = footed.load_state_dict(self.state_dict(), strict=False)
-        if unexpected or not all(key.startswith("foot.") for key in missing):
-            raise ValueError(f"with_foot: unexpected weights {unexpected}, missing {missing}")
+        footed = self._grown("foot.", foot=True)
         assert footed.foot is not None
         for foot_convs, box_convs in zip(footed.foot.convs, footed.head.reg_convs, strict=True):
             foot_convs.load_state_dict(box_convs.state_dict())
-        device = next(self.parameters()).device
-        return footed.to(device).train(self.training)
+        return footed
 
     def with_foot_neck(self) -> YoloxNano:
         """A copy whose foot branch reads its own neck (`FootNeck`), started as a copy of the
         detector's neck and stems, so that it answers as before until trained; all else unchanged."""
         if self.foot is None:
             raise ValueError("a foot neck needs a foot branch (YoloxConfig.foot)")
-        necked = YoloxNano(replace(self.config, foot_neck=True))
-        missing, unexpected = necked.load_state_dict(self.state_dict(), strict=False)
-        if unexpected or not all(key.startswith("foot.features.") for key in missing):
-            raise ValueError(f"with_foot_neck: unexpected weights {unexpected}, missing {missing}")
+        necked = self._grown("foot.features.", foot_neck=True)
         assert necked.foot is not None and necked.foot.features is not None
-        necked.foot.features.neck.load_state_dict(self.neck.state_dict())
-        necked.foot.features.stems.load_state_dict(self.head.stems.state_dict())
-        device = next(self.parameters()).device
-        return necked.to(device).train(self.training)
+        necked.foot.features.neck.load_state_dict(necked.neck.state_dict())
+        necked.foot.features.stems.load_state_dict(necked.head.stems.state_dict())
+        return necked
 
     def with_foot_refine_steps(self, steps: int) -> YoloxNano:
         """A copy whose foot refiner runs `steps` passes; every weight unchanged."""
-        stepped = YoloxNano(replace(self.config, foot_refine_steps=steps))
-        stepped.load_state_dict(self.state_dict(), strict=True)
-        device = next(self.parameters()).device
-        return stepped.to(device).train(self.training)
+        return self._grown(None, foot_refine_steps=steps)
 
     def to_person_only(self) -> YoloxNano:
         """A copy that predicts COCO's person class alone (C = 1), e.g. to fine-tune and export."""
