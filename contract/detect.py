@@ -8,7 +8,7 @@ pipeline calls the same two functions between its own decode and localisation.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -143,10 +143,11 @@ class ModelRunner:
     def default_min_score(self) -> float:
         return self.model.info.default_min_score
 
-    def outputs(self, frames_rgb: Sequence[NDArray[np.uint8]], cameras: Sequence[FisheyeCamera]
+    def outputs(self, frames_rgb: Iterable[NDArray[np.uint8]], cameras: Sequence[FisheyeCamera]
                 ) -> list[FrameOutputs]:
         """Frames (H, W, 3) uint8 RGB and each one's camera (at the frame's size) -> the model's raw
-        outputs, from the input the service would make of each (reduced decode, the model's view)."""
+        outputs, from the input the service would make of each (reduced decode, the model's view).
+        The frames may come one at a time (a generator): only the outputs are kept."""
         info = self.model.info
         found = []
         for rgb, camera in zip(frames_rgb, cameras, strict=True):

@@ -160,7 +160,7 @@ def choose_operating_point(model: ContractModel, frames: Sequence[FrameAnnotatio
     """The best-F1 (NMS IoU, threshold) of `model` on validation `frames` (`detector.operating_point`),
     the evaluation there (its metrics with `min_score` and `nms_iou`), and every IoU's point."""
     runner = ModelRunner(model)
-    outputs = runner.outputs([load_rgb(f) for f in frames], [frame_camera(f) for f in frames])
+    outputs = runner.outputs((load_rgb(f) for f in frames), [frame_camera(f) for f in frames])
 
     def frames_at(nms_iou: float) -> list[EvalFrame]:
         found = runner.select(outputs, EVAL_MIN_SCORE, nms_iou)

@@ -237,7 +237,7 @@ class Finetuner:
         if feet is not None:
             maps, offsets, fine = self.model.forward_with_foot(images)
             foot = self.model.foot
-            refine = (fine, foot.refiner, foot.refine_steps) if foot is not None and foot.refiner else None
+            refine = (fine, foot) if foot is not None and foot.refiner is not None else None
             terms = self.loss(maps, labels, teacher_maps, offsets, feet, refine)
         else:
             terms = self.loss(self.model(images), labels, teacher_maps)

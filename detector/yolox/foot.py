@@ -30,7 +30,7 @@ the near band, where most people stand, hardly learnt (measured: README, "Foot p
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import torch
@@ -88,12 +88,21 @@ class FootHead(nn.Module):
     def forward(self, stem_features: Sequence[Tensor]) -> list[Tensor]:
         return [pred(conv(x)) for x, conv, pred in zip(stem_features, self.convs, self.preds, strict=True)]
 
+    def passes(self, fine_features: Tensor, points: Tensor) -> list[Tensor]:
+        """(B, K, 2) coarse foot points and the (B, width, H/8, W/8) features the refiner reads ->
+        the points after each of its `refine_steps` passes, each about the previous answer (none
+        without a refiner)."""
+        passes: list[Tensor] = []
+        for _ in range(self.refine_steps if self.refiner is not None else 0):
+            assert self.refiner is not None
+            points = self.refiner(fine_features, points)
+            passes.append(points)
+        return passes
+
     def refine(self, fine_features: Tensor, points: Tensor) -> Tensor:
-        """(B, K, 2) coarse foot points -> the refiner's after its `refine_steps` passes (the same
-        points without one)."""
-        if self.refiner is None:
-            return points
-        return refinement_steps(self.refiner, fine_features, points, self.refine_steps)[-1]
+        """(B, K, 2) coarse foot points -> the last pass's (the same points without a refiner)."""
+        passes = self.passes(fine_features, points)
+        return passes[-1] if passes else points
 
 
 class FootRefiner(nn.Module):
@@ -134,23 +143,6 @@ class FootRefiner(nn.Module):
         return points + self.mlp(flat) * REFINE_SCALE_PX
 
 
-def refinement_steps(refiner: FootRefiner, fine_features: Tensor, points: Tensor, steps: int
-                     ) -> list[Tensor]:
-    """(B, K, 2) coarse points -> the points after each of `steps` passes of the refiner, each pass
-    reading the patch about the previous one's answer."""
-    passes = []
-    for _ in range(steps):
-        points = refiner(fine_features, points)
-        passes.append(points)
-    return passes
-
-
-def refine_points(refiner: FootRefiner, steps: int, fine_features: Tensor, points: Tensor) -> list[Tensor]:
-    """(P, 2) coarse points of one image with its (1, C, h, w) stride-8 features -> the (P, 2)
-    points after each pass."""
-    return [p[0] for p in refinement_steps(refiner, fine_features, points[None], steps)]
-
-
 def foot_from_offsets(offsets: Tensor, cxcywh: Tensor) -> Tensor:
     """(..., 2) offsets a, b and (..., 4) `cxcywh` boxes -> (..., 2) foot points, same px."""
     centre_x, _, width, height = cxcywh.unbind(-1)
@@ -159,9 +151,10 @@ def foot_from_offsets(offsets: Tensor, cxcywh: Tensor) -> Tensor:
 
 
 def foot_loss(offsets: Tensor, boxes_xyxy: Tensor, targets: Tensor,
-              refine: Callable[[Tensor], list[Tensor]] | None = None) -> tuple[Tensor, int]:
-    """Sum over positives of metres-weighted L1 and their count (with `refine`, a map of (V, 2)
-    coarse points to the refiner's after each pass, the mean of the coarse and every pass's loss).
+              refine: tuple[Tensor, FootHead] | None = None) -> tuple[Tensor, int]:
+    """Sum over positives of metres-weighted L1 and their count (with `refine`, the image's
+    (1, width, H/8, W/8) features and the head whose refiner reads them: the mean of the coarse
+    and every pass's loss).
 
     offsets (P, 2) predicted a, b; boxes_xyxy (P, 4) the cells' decoded boxes (the foot is read off
     the box the model itself predicts, as at inference); targets (P, 3) foot x, y (px) and metres
@@ -175,9 +168,10 @@ def foot_loss(offsets: Tensor, boxes_xyxy: Tensor, targets: Tensor,
     weight = targets[valid, 2].clamp(max=MAX_METRES_PER_PX)
     error = (predicted - targets[valid, :2]).abs().sum(dim=1)  # (V,) px
     if refine is not None:
-        passes = refine(predicted)
+        fine, head = refine
+        passes = head.passes(fine, predicted[None])
         for refined in passes:
-            error = error + (refined - targets[valid, :2]).abs().sum(dim=1)
+            error = error + (refined[0] - targets[valid, :2]).abs().sum(dim=1)
         error = error / (1 + len(passes))
     return (error * weight).sum(), int(valid.sum())
 

@@ -23,7 +23,6 @@ point. `total` = iou_weight·iou + objectness + class + distill_weight·distill 
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -32,7 +31,7 @@ from torch import Tensor
 from torch.nn import functional
 
 from detector.yolox.decode import cell_grid, flatten_maps
-from detector.yolox.foot import FootRefiner, foot_loss, refine_points
+from detector.yolox.foot import FootHead, foot_loss
 from detector.yolox.head import CLASSES_START, OBJECTNESS
 from detector.yolox.network import STRIDES
 
@@ -146,7 +145,7 @@ class PolarDetectionLoss:
     def __call__(self, maps: Sequence[Tensor], labels_xyxy: Sequence[Tensor],
                  teacher_maps: Sequence[Tensor] | None = None, foot_offsets: Sequence[Tensor] | None = None,
                  feet: Sequence[Tensor] | None = None,
-                 refine: tuple[Tensor, FootRefiner, int] | None = None) -> dict[str, Tensor]:
+                 refine: tuple[Tensor, FootHead] | None = None) -> dict[str, Tensor]:
         """`foot_offsets` the foot branch's maps and `feet` (N_i, 3) per image (targets of
         `detector.yolox.foot.foot_loss`) add the `foot` term; both or neither."""
         if (foot_offsets is None) != (feet is None):
@@ -183,8 +182,7 @@ class PolarDetectionLoss:
                 flat[b, fg, CLASSES_START], class_target, reduction="sum")
             if offsets is not None and feet is not None:
                 targets = feet[b].to(flat.device, flat.dtype)[owner[fg]]  # (P, 3)
-                image_refine = (None if refine is None else functools.partial(
-                    refine_points, refine[1], refine[2], refine[0][b:b + 1]))
+                image_refine = None if refine is None else (refine[0][b:b + 1], refine[1])
                 image_sum, image_count = foot_loss(offsets[b, fg], boxes[b, fg], targets, image_refine)
                 foot_sum, foot_count = foot_sum + image_sum, foot_count + image_count
         norm = float(max(positives, 1))

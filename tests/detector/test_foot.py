@@ -181,6 +181,24 @@ def test_export_carries_the_foot_and_matches_torch(footed: YoloxNano, tmp_path: 
     np.testing.assert_allclose(foot[:, 1], boxes[:, 3] - 0.2 * height, atol=1e-3)
 
 
+def test_foot_loss_with_a_refiner_averages_the_coarse_and_every_pass() -> None:
+    from detector.yolox.foot import FootHead
+
+    head = FootHead(width=2, levels=3, depthwise=True, refine=True, refine_steps=2)
+    assert head.refiner is not None
+    box = torch.tensor([[10.0, 0.0, 14.0, 10.0]])  # box side at (12, 10): 2 px short of the target
+    target = torch.tensor([[12.0, 12.0, 0.05]])
+    fine = torch.zeros(1, 2, 4, 4)
+    coarse, _ = foot_loss(torch.zeros(1, 2), box, target)
+    torch.testing.assert_close(foot_loss(torch.zeros(1, 2), box, target, (fine, head))[0], coarse)  # identity
+    last = head.refiner.mlp[-1]
+    assert isinstance(last, torch.nn.Linear)
+    with torch.no_grad():
+        last.bias.copy_(torch.tensor([0.0, 0.125]))  # each pass moves the point 1 px (scale 8 px) down
+    total, count = foot_loss(torch.zeros(1, 2), box, target, (fine, head))
+    assert count == 1 and total.item() == pytest.approx((2.0 + 1.0 + 0.0) / 3 * 0.05, abs=1e-6)
+
+
 def _coordinate_maps(height: int, width: int) -> torch.Tensor:
     """(1, 2, h, w) stride-8 maps whose channels are each cell's centre x and y in input px."""
     rows, cols = torch.meshgrid(torch.arange(height, dtype=torch.float32),
