@@ -20,6 +20,7 @@ from contract.metadata import ModelInfo
 from contract.model import RawOutputs
 from contract.views import InputMapping, min_decoded_side, prepare_input
 from fisheye import FisheyeCamera, rotated_nms
+from fisheye.view_plan import ViewPlanConfig
 
 FloatArray = NDArray[np.float64]
 
@@ -52,7 +53,7 @@ def select_detections(raw: RawOutputs, mapping: InputMapping, principal_point: t
     boxes = raw.boxes.astype(np.float64)
     scores = raw.scores.astype(np.float64)
     valid = np.isfinite(scores) & np.all(np.isfinite(boxes), axis=1)
-    valid[valid] = mapping.has_area(boxes[valid])
+    valid[valid] = mapping.usable(boxes[valid])
     feet = None if raw.foot is None else raw.foot.astype(np.float64)
     if feet is not None:
         valid &= np.all(np.isfinite(feet), axis=1)
@@ -134,10 +135,12 @@ class ContractModel(Protocol):
 class ModelRunner:
     """Decoded full-size frames with their cameras -> FrameDetections, as the service computes them."""
 
-    def __init__(self, model: ContractModel, nms_iou: float | None = None, max_detections: int = 300) -> None:
+    def __init__(self, model: ContractModel, nms_iou: float | None = None, max_detections: int = 300,
+                 view: ViewPlanConfig = ViewPlanConfig()) -> None:
         self.model = model
         self.nms_iou = model.info.nms_iou if nms_iou is None else nms_iou  # None: the model's own
         self.max_detections = max_detections
+        self.view = view  # how a planned model's views are planned
 
     @property
     def default_min_score(self) -> float:
@@ -151,8 +154,8 @@ class ModelRunner:
         info = self.model.info
         found = []
         for rgb, camera in zip(frames_rgb, cameras, strict=True):
-            reduced = reduce_like_decode(rgb, min_decoded_side(info, camera))
-            image, mapping = prepare_input(info, reduced, camera)
+            reduced = reduce_like_decode(rgb, min_decoded_side(info, camera, self.view))
+            image, mapping = prepare_input(info, reduced, camera, self.view)
             pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
             found.append(FrameOutputs(self.model.run(image), mapping, pp))
         return found

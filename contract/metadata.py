@@ -9,6 +9,11 @@
   `fishloc.polar_max_theta_deg` from the optical axis (or the camera's own field, if smaller);
   boxes `xyxy_polar` in strip px.
 
+`fishloc.view_planned` = `1` (a `polar` model whose graph takes any height and width, multiples of
+32): the service plans each camera's view (`fisheye.view_plan`: rings of the frame, each at its own
+scale, stacked in one input) from the strip the model was trained on, which the `polar_*` metadata
+and `input_size` still describe. Without it, a polar model sees the fixed strip.
+
 `fishloc.default_min_score` and `fishloc.nms_iou` are the model's operating point: the score
 threshold and rotated-NMS IoU chosen together on validation renders (`detector.operating_point`).
 A model without `fishloc.nms_iou` (before 0.3.1) is run at 0.6, the value it was tuned with.
@@ -62,6 +67,7 @@ class ModelInfo:
     polar: PolarSpec | None = None
     sha256: str = ""
     nms_iou: float = LEGACY_NMS_IOU
+    planned: bool = False  # a polar model whose view the service plans per camera
 
     def __post_init__(self) -> None:
         if self.view not in BOX_FORMATS:
@@ -71,6 +77,8 @@ class ModelInfo:
                              f"not {self.box_format!r}")
         if (self.polar is None) != (self.view != VIEW_POLAR):
             raise ValueError("a polar model needs its strip (fishloc.polar_*), other views none")
+        if self.planned and self.polar is None:
+            raise ValueError("only a polar model's view can be planned (fishloc.view_planned)")
         if not (0 <= self.pad_value <= 255 and 0.0 <= self.default_min_score <= 1.0
                 and self.input_size >= 8 and 0.0 < self.nms_iou <= 1.0):
             raise ValueError(f"pad_value {self.pad_value}, default_min_score {self.default_min_score}, "
@@ -90,7 +98,7 @@ class ModelInfo:
             "input_size": self.input_size, "input_wh": list(self.input_wh),
             "trained_on": self.trained_on, "box_format": self.box_format,
             "default_min_score": self.default_min_score, "nms_iou": self.nms_iou,
-            "pad_value": self.pad_value,
+            "pad_value": self.pad_value, "planned": self.planned,
             "licence": self.licence, "sha256": self.sha256,
         }
         if self.polar is not None:
@@ -124,11 +132,18 @@ def parse_metadata(props: dict[str, str], source: str, sha256: str = "") -> Mode
             polar=polar,
             sha256=sha256,
             nms_iou=float(props.get("fishloc.nms_iou", repr(LEGACY_NMS_IOU))),
+            planned=_flag(props.get("fishloc.view_planned", "0"), "fishloc.view_planned"),
         )
     except KeyError as error:
         raise ModelError(f"{source}: a {view} model needs the metadata {error.args[0]}") from None
     except ValueError as error:
         raise ModelError(f"{source}: unusable fishloc.* metadata: {error}") from None
+
+
+def _flag(value: str, name: str) -> bool:
+    if value not in ("0", "1"):
+        raise ValueError(f"{name} must be 0 or 1, got {value!r}")
+    return value == "1"
 
 
 def metadata_props(info: ModelInfo) -> dict[str, str]:
@@ -150,4 +165,6 @@ def metadata_props(info: ModelInfo) -> dict[str, str]:
         props["fishloc.polar_width"] = str(info.polar.width)
         props["fishloc.polar_overlap"] = str(info.polar.overlap)
         props["fishloc.polar_max_theta_deg"] = repr(float(info.polar.max_theta_deg))
+    if info.planned:
+        props["fishloc.view_planned"] = "1"
     return props

@@ -79,7 +79,13 @@ def _check_signature(session: ort.InferenceSession, path: Path, info: ModelInfo)
     if image.type != "tensor(uint8)":
         raise ModelError(f"{path}: input 'image' must be uint8, got {image.type}")
     width, height = info.input_wh
-    _check_dims("image", list(image.shape), (None, height, width, 3), path)
+    if info.planned:
+        _check_dims("image", list(image.shape), (None, None, None, 3), path)
+        if any(isinstance(dim, int) for dim in list(image.shape)[1:3]):
+            raise ModelError(f"{path}: fishloc.view_planned needs a dynamic height and width, "
+                             f"the input 'image' has shape {list(image.shape)}")
+    else:
+        _check_dims("image", list(image.shape), (None, height, width, 3), path)
     _check_dims("boxes", list(outputs["boxes"].shape), (None, None, 4), path)
     _check_dims("scores", list(outputs["scores"].shape), (None, None), path)
     if FOOT_OUTPUT in outputs:
@@ -125,7 +131,12 @@ class OnnxModel:
     def run_batch(self, images: NDArray[np.uint8]) -> list[RawOutputs]:
         """(N, H, W, 3) uint8 RGB inputs -> one RawOutputs each."""
         width, height = self.info.input_wh
-        if images.ndim != 4 or images.shape[1:] != (height, width, 3) or images.dtype != np.uint8:
+        if self.info.planned:
+            if images.ndim != 4 or images.shape[3] != 3 or images.shape[1] % 32 or images.shape[2] % 32 or (
+                    images.dtype != np.uint8):
+                raise ValueError(f"model input must be (N, H, W, 3) uint8 with H and W multiples of 32, "
+                                 f"got {images.shape} {images.dtype}")
+        elif images.ndim != 4 or images.shape[1:] != (height, width, 3) or images.dtype != np.uint8:
             raise ValueError(f"model input must be (N, {height}, {width}, 3) uint8, "
                              f"got {images.shape} {images.dtype}")
         found = self.session.run(self._outputs, {"image": images})

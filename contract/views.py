@@ -27,6 +27,7 @@ from contract.metadata import ModelInfo
 from fisheye import FisheyeCamera, Letterbox
 from fisheye.lens import theta_to_radius
 from fisheye.polar import PolarGrid, unwrap_with_maps
+from fisheye.view_plan import ViewPlan, ViewPlanConfig, ViewReference, plan_view
 
 FloatArray = NDArray[np.float64]
 
@@ -42,8 +43,9 @@ class InputMapping(Protocol):
         """(N, 2) input px -> (N, 2) frame px."""
         ...
 
-    def has_area(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
-        """(N,) which of (N, 4) finite boxes in the view's format have a positive size."""
+    def usable(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
+        """(N,) which of (N, 4) finite boxes in the view's format have a positive size and stand
+        where the view reads them (a planned view: centred in the radii their band owns)."""
         ...
 
     def presuppress(self, boxes: NDArray[np.floating], scores: NDArray[np.floating],
@@ -70,7 +72,7 @@ class FisheyeInput:
     def points_to_frame(self, points: NDArray[np.floating]) -> FloatArray:
         return self.letterbox.input_to_frame(points).reshape(-1, 2)
 
-    def has_area(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
+    def usable(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
         return (boxes[:, 2] > 0) & (boxes[:, 3] > 0)
 
     def presuppress(self, boxes: NDArray[np.floating], scores: NDArray[np.floating],
@@ -93,28 +95,40 @@ class PolarInput:
     def points_to_frame(self, points: NDArray[np.floating]) -> FloatArray:
         return self.grid.strip_to_frame(points).reshape(-1, 2)
 
-    def has_area(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
+    def usable(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
         return (boxes[:, 2] > boxes[:, 0]) & (boxes[:, 3] > boxes[:, 1])
 
     def presuppress(self, boxes: NDArray[np.floating], scores: NDArray[np.floating],
                     iou_threshold: float) -> NDArray[np.int64]:
-        # Axis-aligned NMS in the strip (OpenCV's, in C++): the strip boxes of one person overlap
-        # there as their ring segments do in the frame. The frame's rotated NMS then only merges
-        # what the strip cannot see, the copies of a person in the overlap columns.
-        if len(scores) == 0:
-            return np.zeros(0, dtype=np.int64)
-        xywh = np.concatenate([boxes[:, :2], boxes[:, 2:] - boxes[:, :2]], axis=1)
-        kept = cv2.dnn.NMSBoxes(xywh.tolist(), np.asarray(scores, dtype=float).tolist(), 0.0, iou_threshold)
-        return np.asarray(kept, dtype=np.int64).reshape(-1)
+        return strip_nms(boxes, scores, iou_threshold)
 
     def overlaps(self, boxes: NDArray[np.floating], others: NDArray[np.floating]) -> FloatArray | None:
-        a, b = np.asarray(boxes, dtype=np.float64)[:, None, :], np.asarray(others, dtype=np.float64)[None]
-        width = np.clip(np.minimum(a[..., 2], b[..., 2]) - np.maximum(a[..., 0], b[..., 0]), 0.0, None)
-        height = np.clip(np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 1], b[..., 1]), 0.0, None)
-        inter = width * height
-        area_a = (a[..., 2] - a[..., 0]) * (a[..., 3] - a[..., 1])
-        area_b = (b[..., 2] - b[..., 0]) * (b[..., 3] - b[..., 1])
-        return np.asarray(inter / np.maximum(area_a + area_b - inter, 1e-12), dtype=np.float64)
+        return strip_iou(boxes, others)
+
+
+def strip_nms(boxes: NDArray[np.floating], scores: NDArray[np.floating], iou_threshold: float
+              ) -> NDArray[np.int64]:
+    """Indices of (N, 4) `xyxy` strip boxes left by axis-aligned NMS, best first.
+
+    OpenCV's, in C++: the strip boxes of one person overlap there as their ring segments do in the
+    frame. The frame's rotated NMS then only merges what the strip cannot see, the copies of a
+    person in the overlap columns (and, in a planned view, in two bands)."""
+    if len(scores) == 0:
+        return np.zeros(0, dtype=np.int64)
+    xywh = np.concatenate([boxes[:, :2], boxes[:, 2:] - boxes[:, :2]], axis=1)
+    kept = cv2.dnn.NMSBoxes(xywh.tolist(), np.asarray(scores, dtype=float).tolist(), 0.0, iou_threshold)
+    return np.asarray(kept, dtype=np.int64).reshape(-1)
+
+
+def strip_iou(boxes: NDArray[np.floating], others: NDArray[np.floating]) -> FloatArray:
+    """(N, M) IoU of (N, 4) and (M, 4) `xyxy` strip boxes."""
+    a, b = np.asarray(boxes, dtype=np.float64)[:, None, :], np.asarray(others, dtype=np.float64)[None]
+    width = np.clip(np.minimum(a[..., 2], b[..., 2]) - np.maximum(a[..., 0], b[..., 0]), 0.0, None)
+    height = np.clip(np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 1], b[..., 1]), 0.0, None)
+    inter = width * height
+    area_a = (a[..., 2] - a[..., 0]) * (a[..., 3] - a[..., 1])
+    area_b = (b[..., 2] - b[..., 0]) * (b[..., 3] - b[..., 1])
+    return np.asarray(inter / np.maximum(area_a + area_b - inter, 1e-12), dtype=np.float64)
 
 
 def polar_radius_px(camera: FisheyeCamera, max_theta_deg: float) -> float:
@@ -138,11 +152,34 @@ def polar_grid(info: ModelInfo, camera: FisheyeCamera) -> PolarGrid:
                      height=info.input_size, width=info.polar.width, overlap=info.polar.overlap)
 
 
-def min_decoded_side(info: ModelInfo, camera: FisheyeCamera) -> int:
+def view_reference(info: ModelInfo) -> ViewReference:
+    """The strip a planned model was trained on."""
+    if info.polar is None:
+        raise ValueError(f"model {info.name} has the {info.view} view, not polar")
+    return ViewReference(rows=info.input_size, turn_columns=info.polar.width, overlap=info.polar.overlap,
+                         max_theta_deg=info.polar.max_theta_deg)
+
+
+@functools.lru_cache(maxsize=256)
+def _cached_plan(reference: ViewReference, camera_json: str, config: ViewPlanConfig) -> ViewPlan:
+    return plan_view(FisheyeCamera.model_validate_json(camera_json), reference, config)
+
+
+def view_plan(info: ModelInfo, camera: FisheyeCamera, config: ViewPlanConfig = ViewPlanConfig()) -> ViewPlan:
+    """The planned view of a planned model for frames of `camera` (at the frames' size), made once
+    per camera, model and budget. `fisheye.view_plan.ViewPlanError` when none can be made."""
+    return _cached_plan(view_reference(info), camera.model_dump_json(), config)
+
+
+def min_decoded_side(info: ModelInfo, camera: FisheyeCamera, config: ViewPlanConfig = ViewPlanConfig()) -> int:
     """The smallest long side (px) a reduced decode of `camera`'s frame may have for this model:
-    the letterbox's side, or for a polar strip one frame pixel per strip row along the radius."""
+    the letterbox's side, or for a polar strip one frame pixel per strip row along the radius (for
+    a planned view, per row of its densest band)."""
     if info.polar is None:
         return info.input_size
+    if info.planned:
+        plan = view_plan(info, camera, config)
+        return math.ceil(max(camera.image_size) * max(g.px_per_radius_px for g in plan.grids))
     grid = polar_grid(info, camera)
     return math.ceil(max(camera.image_size) * grid.height / grid.radius_px)
 
@@ -156,10 +193,11 @@ def _cached_maps(grid: PolarGrid, scale_xy: tuple[float, float]) -> tuple[NDArra
     return np.asarray(fixed_uv), np.asarray(fraction)
 
 
-def prepare_input(info: ModelInfo, rgb: NDArray[np.uint8], camera: FisheyeCamera
-                  ) -> tuple[NDArray[np.uint8], InputMapping]:
+def prepare_input(info: ModelInfo, rgb: NDArray[np.uint8], camera: FisheyeCamera,
+                  config: ViewPlanConfig = ViewPlanConfig()) -> tuple[NDArray[np.uint8], InputMapping]:
     """A frame of `camera` (scaled to the frame's full size), decoded as `rgb` (h, w, 3) at full or
-    reduced scale -> the model's input (H, W, 3) uint8 and the mapping of its px to the frame's."""
+    reduced scale -> the model's input (H, W, 3) uint8 and the mapping of its px to the frame's
+    (a planned model's view planned with `config`)."""
     frame_wh = camera.image_size
     decoded_wh = (rgb.shape[1], rgb.shape[0])
     if info.polar is None:
@@ -167,7 +205,79 @@ def prepare_input(info: ModelInfo, rgb: NDArray[np.uint8], camera: FisheyeCamera
         # A reduced decode keeps the letterbox of the full frame: its pixels map the same way.
         image = dataclasses.replace(letterbox, frame_wh=decoded_wh).apply(rgb, info.pad_value)
         return image, FisheyeInput(letterbox)
-    grid = polar_grid(info, camera)
     scale_xy = (decoded_wh[0] / frame_wh[0], decoded_wh[1] / frame_wh[1])
+    if info.planned:
+        plan = view_plan(info, camera, config)
+        map_u, map_v = _cached_canvas_maps(plan, scale_xy)
+        return unwrap_with_maps(rgb, map_u, map_v, info.pad_value), PlannedInput(plan)
+    grid = polar_grid(info, camera)
     map_u, map_v = _cached_maps(grid, scale_xy)
     return unwrap_with_maps(rgb, map_u, map_v, info.pad_value), PolarInput(grid)
+
+
+@dataclass(frozen=True)
+class PlannedInput:
+    """A planned view's mapping (`fisheye.view_plan.ViewPlan`): strips of several rings stacked in
+    one canvas; a box or point belongs to the piece whose rows hold it (a box: its centre)."""
+
+    plan: ViewPlan
+
+    def _piece_of(self, rows: NDArray[np.floating]) -> NDArray[np.int64]:
+        starts = np.asarray(self.plan.row_offsets, dtype=np.float64)
+        return np.clip(np.searchsorted(starts, np.asarray(rows, dtype=np.float64) + 0.5, side="right") - 1,
+                       0, len(starts) - 1).astype(np.int64)
+
+    def _each_piece(self, values: NDArray[np.floating], rows: NDArray[np.floating], row_columns: list[int],
+                    convert: str) -> FloatArray:
+        out = np.zeros((len(values), 4 if convert == "boxes" else 2), dtype=np.float64)
+        piece = self._piece_of(rows)
+        for index in np.unique(piece):
+            grid, offset = self.plan.grids[index], self.plan.row_offsets[index]
+            chosen = piece == index
+            local = np.asarray(values[chosen], dtype=np.float64).copy()
+            local[:, row_columns] = np.clip(local[:, row_columns] - offset, -0.5, grid.height - 0.5)
+            out[chosen] = (grid.polar_to_radius_aligned(local) if convert == "boxes"
+                           else grid.strip_to_frame(local))
+        return out
+
+    def boxes_to_frame(self, boxes: NDArray[np.floating]) -> FloatArray:
+        centre_rows = (np.asarray(boxes)[:, 1] + np.asarray(boxes)[:, 3]) / 2
+        return self._each_piece(boxes, centre_rows, [1, 3], "boxes")
+
+    def points_to_frame(self, points: NDArray[np.floating]) -> FloatArray:
+        return self._each_piece(points, np.asarray(points)[:, 1], [1], "points")
+
+    def usable(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
+        sized = (boxes[:, 2] > boxes[:, 0]) & (boxes[:, 3] > boxes[:, 1])
+        centre_rows = (np.asarray(boxes, dtype=np.float64)[:, 1] + np.asarray(boxes, dtype=np.float64)[:, 3]) / 2
+        piece = self._piece_of(centre_rows)
+        offsets = np.asarray(self.plan.row_offsets, dtype=np.float64)[piece]
+        owned = np.zeros(len(boxes), dtype=bool)
+        for index in np.unique(piece):
+            chosen = piece == index
+            centre_px = self.plan.grids[index].row_to_radius_px(centre_rows[chosen] - offsets[chosen])
+            low, high = self.plan.owned_px[index]
+            owned[chosen] = (centre_px >= low) & (centre_px < high)
+        return sized & owned
+
+    def presuppress(self, boxes: NDArray[np.floating], scores: NDArray[np.floating],
+                    iou_threshold: float) -> NDArray[np.int64]:
+        return strip_nms(boxes, scores, iou_threshold)
+
+    def overlaps(self, boxes: NDArray[np.floating], others: NDArray[np.floating]) -> FloatArray | None:
+        return strip_iou(boxes, others)
+
+
+@functools.lru_cache(maxsize=32)
+def _cached_canvas_maps(plan: ViewPlan, scale_xy: tuple[float, float]) -> tuple[NDArray[Any], NDArray[Any]]:
+    """The canvas's sampling maps (fixed-point), every piece at its rows, the gaps outside the frame."""
+    width, height = plan.canvas_wh
+    map_u = np.full((height, width), -1e4, dtype=np.float32)
+    map_v = np.full((height, width), -1e4, dtype=np.float32)
+    for grid, offset in zip(plan.grids, plan.row_offsets, strict=True):
+        piece_u, piece_v = grid.sampling_maps(scale_xy)
+        rows, columns = piece_u.shape
+        map_u[offset:offset + rows, :columns] = piece_u
+        map_v[offset:offset + rows, :columns] = piece_v
+    fixed_uv, fraction = cv2.convertMaps(map_u, map_v, cv2.CV_16SC2)
+    return np.asarray(fixed_uv), np.asarray(fraction)

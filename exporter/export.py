@@ -48,15 +48,28 @@ class ExportReport:
     integer_ops: dict[str, int] | None = None
 
 
-def contract_model(checkpoint: Checkpoint, input_size: int | None = None,
-                   source: str = "<memory>") -> tuple[nn.Module, ModelInfo]:
+@dataclass(frozen=True)
+class GraphOptions:
+    """How the graph is built: `planned`, a polar graph of any height and width (multiples of 32)
+    whose view the service plans per camera (`fishloc.view_planned`); `peaks`, its top K taken
+    among peak cells only (`detector.yolox.decode.peak_cells`)."""
+
+    planned: bool = False
+    peaks: bool = False
+
+
+def contract_model(checkpoint: Checkpoint, input_size: int | None = None, source: str = "<memory>",
+                   options: GraphOptions = GraphOptions()) -> tuple[nn.Module, ModelInfo]:
     """`checkpoint`'s network wrapped to the ONNX contract, at `input_size` (default: trained; a
     letterbox side or a strip height), and the metadata its export carries."""
     if input_size is not None and input_size % 32 != 0:
         raise ValueError(f"--input-size must be a multiple of 32, got {input_size}")
     if input_size is not None and input_size != checkpoint.config.input_size:
         checkpoint = replace(checkpoint, config=replace(checkpoint.config, input_size=input_size))
-    return contract_module(checkpoint, source), contract_info(checkpoint)
+    info = contract_info(checkpoint)
+    if (options.planned or options.peaks) and info.polar is None:
+        raise ValueError("--planned and --peaks need a polar network")
+    return contract_module(checkpoint, source, options.peaks), replace(info, planned=options.planned)
 
 
 def _torch_to_onnx(model: nn.Module, info: ModelInfo, path: Path, opset: int) -> None:
@@ -65,13 +78,17 @@ def _torch_to_onnx(model: nn.Module, info: ModelInfo, path: Path, opset: int) ->
     with torch.no_grad():
         outputs = ["boxes", "scores", "foot"][:len(model(example))]
     batch = torch.export.Dim("batch", min=1, max=1024)
+    shapes: dict[int, object] = {0: batch}
+    if info.planned:  # any height and width, multiples of the largest stride
+        shapes[1] = 32 * torch.export.Dim("rows32", min=2, max=256)
+        shapes[2] = 32 * torch.export.Dim("columns32", min=2, max=256)
     # The exporter prints progress and torch-internal deprecation notices; keep the command's output ours.
     with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()):
         warnings.simplefilter("ignore")
         logging.getLogger("torch.onnx").setLevel(logging.ERROR)
         torch.onnx.export(model, (example,), str(path), input_names=["image"],
                           output_names=outputs, opset_version=opset, dynamo=True,
-                          dynamic_shapes={"image": {0: batch}}, external_data=False, verbose=False)
+                          dynamic_shapes={"image": shapes}, external_data=False, verbose=False)
 
 
 def _write_metadata(path: Path, metadata: dict[str, str]) -> None:
@@ -119,13 +136,14 @@ def load_calibration_frames(folder: str | Path, info: ModelInfo, limit: int = 64
 def export_onnx(checkpoint: Checkpoint, output: str | Path, input_size: int | None = None,
                 opset: int = DEFAULT_OPSET, int8: bool = False,
                 calibration_frames: NDArray[np.uint8] | None = None,
-                parity_frames: NDArray[np.uint8] | None = None) -> ExportReport:
+                parity_frames: NDArray[np.uint8] | None = None,
+                options: GraphOptions = GraphOptions()) -> ExportReport:
     """Export, write metadata, check the graph and its parity with torch; return what was verified.
 
     With `int8`, the verified float graph is quantised and written to `output` instead; the float
     parity report still describes the graph before quantisation.
     """
-    model, info = contract_model(checkpoint, input_size)
+    model, info = contract_model(checkpoint, input_size, options=options)
     width, size = info.input_wh
     target = Path(output)
     target.parent.mkdir(parents=True, exist_ok=True)
@@ -135,8 +153,11 @@ def export_onnx(checkpoint: Checkpoint, output: str | Path, input_size: int | No
         _write_metadata(float_path, metadata_props(info))
         frames = (parity_frames if parity_frames is not None
                   else synthetic_parity_frames(size, width=width))
-        parity = check_parity(model, OnnxModel(float_path, SessionThreads(intra_op=1)), frames,
-                              info.default_min_score)
+        session = OnnxModel(float_path, SessionThreads(intra_op=1))
+        parity = check_parity(model, session, frames, info.default_min_score)
+        if info.planned:  # a planned graph must agree at a canvas unlike the trained strip, too
+            check_parity(model, session, synthetic_parity_frames(size + 64, width=width // 2 + 32)[:1],
+                         info.default_min_score)
         integer_ops = None
         if int8:
             if calibration_frames is None:
@@ -162,6 +183,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-score", type=float, default=None,
                         help="override fishloc.default_min_score")
     parser.add_argument("--nms-iou", type=float, default=None, help="override fishloc.nms_iou")
+    parser.add_argument("--planned", action="store_true",
+                        help="polar graph of any height and width: the service plans each camera's view")
+    parser.add_argument("--peaks", action="store_true",
+                        help="take the top K among peak cells only (every person reaches NMS in a crowd)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -185,10 +210,12 @@ def run(args: argparse.Namespace) -> int:
     try:
         checkpoint.build(args.checkpoint)  # a mismatched checkpoint fails here, with its own message
         calibration = None
+        options = GraphOptions(planned=args.planned, peaks=args.peaks)
         if args.int8:
-            model_info = contract_model(checkpoint, args.input_size, args.checkpoint)[1]
+            model_info = contract_model(checkpoint, args.input_size, args.checkpoint, options)[1]
             calibration = load_calibration_frames(args.calibration_data, model_info)
-        report = export_onnx(checkpoint, args.output, args.input_size, args.opset, args.int8, calibration)
+        report = export_onnx(checkpoint, args.output, args.input_size, args.opset, args.int8, calibration,
+                             options=options)
     except (CheckpointError, ValueError) as error:
         print(f"fishloc export: {error}", file=sys.stderr)
         return 2

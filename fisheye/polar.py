@@ -7,12 +7,14 @@ axis-aligned box [x1, x2] × [y1, y2], and a pretrained upright detector can rea
 Strip pixels (`x` right, `y` down, centres at integers) map to frame pixels as
 
     ψ(x) = ψ0 + 2π·(x + 0.5) / width                      (screen angle atan2(v − v0, u − u0))
-    ρ(y) = radius_px · (1 − (y + 0.5) / height)            (distance from the principal point)
+    ρ(y) = ρ_out − (ρ_out − ρ_in)·(y + 0.5) / height       (distance from the principal point)
     u = u0 + ρ·cos ψ,   v = v0 + ρ·sin ψ
 
-so the top edge (y = −0.5) is the outer radius and the bottom edge (y = height − 0.5) the
-principal point. `width` columns cover 360°; a strip may carry `overlap` more columns that repeat
-its first ones, so that nobody standing at the seam is cut in two.
+so the top edge (y = −0.5) is the outer radius `radius_px` and the bottom edge (y = height − 0.5)
+the inner radius `inner_radius_px`, the principal point itself by default. `width` columns cover
+360°; a strip shows `span` of them (all by default; fewer for one piece of a ring, which then
+starts at ψ0 = `start_rad`) plus `overlap` more that continue past them (for a whole turn they
+repeat its first columns), so that nobody standing at the seam is cut in two.
 
 A strip box [x1, y1, x2, y2] is the ring segment ψ ∈ [ψ(x1), ψ(x2)], ρ ∈ [ρ(y2), ρ(y1)]; in the frame
 it becomes the radius-aligned box on the segment's middle ray, as long as the segment and as wide
@@ -39,8 +41,9 @@ TWO_PI = 2.0 * math.pi
 
 @dataclass(frozen=True)
 class PolarGrid:
-    """How a frame is unwrapped: about `principal_point` (frame px), out to `radius_px`, into a strip
-    of `height` rows and `width` columns per turn, plus `overlap` columns that repeat the first ones."""
+    """How a frame is unwrapped: about `principal_point` (frame px), the ring from `inner_radius_px`
+    out to `radius_px`, into a strip of `height` rows and `width` columns per turn of which it shows
+    `span` (default: the turn) from `start_rad` on, plus `overlap` columns that continue past them."""
 
     principal_point: tuple[float, float]
     radius_px: float
@@ -48,18 +51,30 @@ class PolarGrid:
     width: int
     overlap: int = 0
     start_rad: float = 0.0
+    inner_radius_px: float = 0.0
+    span: int = 0  # 0: the whole turn, `width`
 
     def __post_init__(self) -> None:
         if self.height < 1 or self.width < 1 or self.overlap < 0 or self.overlap > self.width:
             raise ValueError(f"strip of {self.height} rows, {self.width} columns and {self.overlap} "
                              "overlap columns: rows and columns must be positive, 0 ≤ overlap ≤ width")
+        if not 0 <= self.span <= self.width:
+            raise ValueError(f"a strip shows 0 < span ≤ width columns, got span {self.span} of {self.width}")
         if not (math.isfinite(self.radius_px) and self.radius_px > 0):
             raise ValueError(f"radius_px must be positive, got {self.radius_px}")
+        if not (math.isfinite(self.inner_radius_px) and 0 <= self.inner_radius_px < self.radius_px):
+            raise ValueError(f"inner_radius_px must lie in [0, radius_px {self.radius_px}), "
+                             f"got {self.inner_radius_px}")
+
+    @property
+    def shown_columns(self) -> int:
+        """Columns of the turn the strip shows before its overlap."""
+        return self.span or self.width
 
     @property
     def strip_wh(self) -> tuple[int, int]:
         """(width, height) of the strip the model sees, overlap included."""
-        return self.width + self.overlap, self.height
+        return self.shown_columns + self.overlap, self.height
 
     @property
     def px_per_rad(self) -> float:
@@ -69,7 +84,7 @@ class PolarGrid:
     @property
     def px_per_radius_px(self) -> float:
         """Strip rows per frame pixel of radius."""
-        return self.height / self.radius_px
+        return self.height / (self.radius_px - self.inner_radius_px)
 
     # ----- 1-D maps
 
@@ -82,10 +97,12 @@ class PolarGrid:
         return (turns - np.floor(turns)) * self.width - 0.5
 
     def row_to_radius_px(self, y: ArrayLike) -> FloatArray:
-        return self.radius_px * (1.0 - (np.asarray(y, dtype=np.float64) + 0.5) / self.height)
+        depth = self.radius_px - self.inner_radius_px
+        return self.radius_px - depth * (np.asarray(y, dtype=np.float64) + 0.5) / self.height
 
     def radius_to_row(self, radius_px: ArrayLike) -> FloatArray:
-        return (1.0 - np.asarray(radius_px, dtype=np.float64) / self.radius_px) * self.height - 0.5
+        depth = self.radius_px - self.inner_radius_px
+        return (self.radius_px - np.asarray(radius_px, dtype=np.float64)) / depth * self.height - 0.5
 
     # ----- points
 

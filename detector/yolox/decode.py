@@ -59,12 +59,27 @@ def class_scores(decoded: Tensor) -> Tensor:
     return decoded[..., OBJECTNESS:CLASSES_START] * decoded[..., CLASSES_START:]
 
 
-def top_people(net: nn.Module, image: Tensor, max_detections: int) -> tuple[Tensor, Tensor, Tensor | None]:
+def peak_cells(maps: Sequence[Tensor]) -> Tensor:
+    """Raw maps -> (B, A) bool: the cells whose person score is the highest of their 3 x 3
+    neighbourhood on their own level (CenterNet's max-pool peaks).
+
+    A person lights up a blob of cells on each level; keeping one per blob before the top K lets
+    the K slots hold K people's candidates instead of the strongest few people's neighbours.
+    """
+    peaks: list[Tensor] = []
+    for m in maps:
+        score = m[:, OBJECTNESS:OBJECTNESS + 1].sigmoid() * m[:, CLASSES_START:CLASSES_START + 1].sigmoid()
+        peaks.append(score >= nn.functional.max_pool2d(score, 3, stride=1, padding=1))  # (B, 1, h, w)
+    return flatten_maps(peaks)[..., 0]  # (B, A)
+
+
+def top_people(net: nn.Module, image: Tensor, max_detections: int, peaks: bool = False
+               ) -> tuple[Tensor, Tensor, Tensor | None]:
     """(N, H, W, 3) uint8 RGB images -> the `max_detections` cells of highest objectness x
-    p(person): boxes (N, K, 4) `cxcywh` in YOLOX's edge coordinates (pixel i spans [i, i + 1)),
-    scores (N, K) descending and, for a network with a foot branch, their foot points (N, K, 2) in
-    the same coordinates (else None). What both views' ONNX graphs compute before their own box
-    layout."""
+    p(person) (with `peaks`, among the cells that are peaks of their level: `peak_cells`): boxes
+    (N, K, 4) `cxcywh` in YOLOX's edge coordinates (pixel i spans [i, i + 1)), scores (N, K)
+    descending and, for a network with a foot branch, their foot points (N, K, 2) in the same
+    coordinates (else None). What both views' ONNX graphs compute before their own box layout."""
     bgr = image.permute(0, 3, 1, 2).flip(1).float()  # (N, 3, H, W) BGR 0-255, as YOLOX was trained
     offsets: list[Tensor] | None = None
     if isinstance(net, YoloxNano) and net.foot is not None:
@@ -73,6 +88,8 @@ def top_people(net: nn.Module, image: Tensor, max_detections: int) -> tuple[Tens
         maps = net(bgr)
     decoded = decode(maps)  # (N, A, 5 + C): cxcywh px, objectness, classes
     scores = class_scores(decoded)[..., 0]  # (N, A) person
+    if peaks:
+        scores = torch.where(peak_cells(maps), scores, torch.zeros_like(scores))
     k = min(max_detections, scores.shape[1])
     top_scores, top = torch.topk(scores, k, dim=1)  # (N, K)
     cxcywh = torch.gather(decoded[..., :4], 1, top[..., None].expand(-1, -1, 4))  # (N, K, 4)

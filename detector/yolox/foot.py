@@ -130,8 +130,10 @@ class FootRefiner(nn.Module):
         _, _, height, width = fine_features.shape
         pattern = self.get_buffer("pattern")  # (S², 2) px about the point
         where = points[:, :, None, :] + pattern  # (B, K, S², 2) px, YOLOX edge coordinates
-        extent = torch.stack([torch.full_like(where[..., 0], float(width * REFINE_STRIDE)),
-                              torch.full_like(where[..., 1], float(height * REFINE_STRIDE))], dim=-1)
+        # Tensor times the map's size keeps the size symbolic in an export of any height and width
+        # (a Python float of it would be baked in at the traced size).
+        one = where.new_ones(())
+        extent = torch.stack([one * (width * REFINE_STRIDE), one * (height * REFINE_STRIDE)])  # (2,) px
         grid = where / extent * 2.0 - 1.0  # align_corners=False: -1 and 1 are the map's outer edges
         sampled = functional.grid_sample(fine_features, grid, mode="bilinear", padding_mode="border",
                                          align_corners=False)  # (B, C, K, S²)

@@ -89,13 +89,14 @@ class PolarContract(nn.Module):
     integers), scores (N, K) float32 descending: objectness x p(person) of the top K cells, and for
     a network with a foot branch `foot` (N, K, 2) strip px."""
 
-    def __init__(self, net: YoloxNano, max_detections: int) -> None:
+    def __init__(self, net: YoloxNano, max_detections: int, peaks: bool = False) -> None:
         super().__init__()
         self.net = net
         self.max_detections = max_detections
+        self.peaks = peaks
 
     def forward(self, image: Tensor) -> tuple[Tensor, ...]:
-        cxcywh, scores, foot = top_people(self.net, image, self.max_detections)  # (N, K, 4), (N, K)
+        cxcywh, scores, foot = top_people(self.net, image, self.max_detections, self.peaks)  # (N, K, 4), (N, K)
         centre, half = cxcywh[..., :2] - EDGE_TO_CENTRE_PX, cxcywh[..., 2:] / 2
         boxes = torch.cat([centre - half, centre + half], dim=-1)
         if foot is None:

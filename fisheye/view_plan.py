@@ -1,0 +1,341 @@
+"""A camera's view planned for a polar detector: rings of the frame, each unwrapped at its own scale.
+
+A detector trained on one strip (`ViewReference`: `rows` for the ring of θ = 90°, `turn_columns`
+per turn) finds people well in a band of sizes. In a fixed strip a person's size follows the floor
+distance: big below the lens, a few pixels at the rim. The plan measures a standing adult
+(`ViewPlanConfig.person_*`) wherever the floor is in view through the camera's own lens, altitude
+and tilt, and cuts the frame into rings (bands): the inner ring at the trained scale, the outer at a
+larger one where the person falls below the target size. Scaling both axes of a band by the same
+factor keeps people's shape as the network learnt it.
+
+Each band is unwrapped into `pieces` strips that cover equal angles (a band at 1.5x the trained
+scale has 1.5x the columns per turn): pieces of every band have the same width, so they stack into
+one input image (the canvas), each below the previous one with `gap_rows` rows of padding between
+them. A band's strip rows map linearly to its radii (`fisheye.polar.PolarGrid` with an inner radius).
+
+The outer band starts where the inner band's people end: the inner band reaches up to the head of a
+person whose feet stand at the split, so everyone is whole in at least one band; the detector's NMS
+in the frame merges whom both bands see.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fisheye.camera import FisheyeCamera
+from fisheye.lens import theta_to_radius
+from fisheye.polar import TWO_PI, PolarGrid
+
+FloatArray = NDArray[np.float64]
+STRIDE = 32  # the canvas's sides are multiples of the network's largest stride
+
+
+class ViewPlanError(ValueError):
+    """A camera whose view cannot be planned (circle outside the frame, a budget too small)."""
+
+
+@dataclass(frozen=True)
+class ViewReference:
+    """The strip a model was trained on: `rows` for the radius of the ring θ = `max_theta_deg`,
+    `turn_columns` per turn and `overlap` repeated columns (DESIGN.md's `polar` view)."""
+
+    rows: int = 416
+    turn_columns: int = 1664
+    overlap: int = 128
+    max_theta_deg: float = 90.0
+
+    @property
+    def pixels(self) -> int:
+        return self.rows * (self.turn_columns + self.overlap)
+
+
+@dataclass(frozen=True)
+class ViewPlanConfig:
+    """What a plan aims at. `scales` are the band scales it may use (1.0: the trained strip), the
+    smallest first; a band gets the smallest scale at which the person reaches `target_along_px`
+    rows along the ray and `target_across_px` columns across it, or the largest scale."""
+
+    person_height_m: float = 1.7
+    person_width_m: float = 0.5
+    target_along_px: float = 96.0
+    target_across_px: float = 48.0
+    scales: tuple[float, ...] = (1.0, 1.5)
+    floor_theta_deg: float = 80.0  # people are planned for up to this angle from the axis (17 m at 3 m)
+    max_pixels: int = 2_000_000
+    gap_rows: int = STRIDE
+
+    def __post_init__(self) -> None:
+        if not self.scales or any(not (0.25 <= s <= 4.0) for s in self.scales) or (
+                list(self.scales) != sorted(set(self.scales))):
+            raise ValueError(f"scales must be increasing, each in [0.25, 4], got {self.scales}")
+        if not (0 < self.person_height_m < 3 and 0 < self.person_width_m < 2):
+            raise ValueError("person_height_m must lie in (0, 3), person_width_m in (0, 2)")
+        if self.target_along_px <= 0 or self.target_across_px <= 0:
+            raise ValueError("targets must be positive")
+        if self.max_pixels < 64 * 64:
+            raise ValueError(f"max_pixels must be at least {64 * 64}, got {self.max_pixels}")
+
+
+@dataclass(frozen=True)
+class ViewBand:
+    """One ring of the frame: radii [`inner_radius_px`, `radius_px`] unwrapped at `scale` times the
+    trained strip into `pieces` strips of `rows` rows."""
+
+    inner_radius_px: float
+    radius_px: float
+    scale: float
+    rows: int
+    pieces: int
+    owned_px: tuple[float, float] = (0.0, math.inf)  # feet radii whose people this band reports
+
+
+@dataclass(frozen=True)
+class SmallestPerson:
+    """The smallest standing adult of the planned view, in model-input px, and where it stands."""
+
+    along_px: float
+    across_px: float
+    radius_px: float
+    distance_m: float
+
+
+@dataclass(frozen=True)
+class ViewPlan:
+    """The planned view of one camera: the grids of its pieces (frame px) and where each sits in the
+    canvas (`row_offsets`), the canvas's (width, height), its bands and what it costs."""
+
+    grids: tuple[PolarGrid, ...]
+    row_offsets: tuple[int, ...]
+    canvas_wh: tuple[int, int]
+    bands: tuple[ViewBand, ...]
+    smallest: SmallestPerson
+    reference_pixels: int
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def owned_px(self) -> tuple[tuple[float, float], ...]:
+        """Per piece, the feet radii (frame px) whose detections it reports: each person once."""
+        return tuple(band.owned_px for band in self.bands for _ in range(band.pieces))
+
+    @property
+    def pixels(self) -> int:
+        return self.canvas_wh[0] * self.canvas_wh[1]
+
+    @property
+    def cost_ratio(self) -> float:
+        """Input pixels against the trained strip's (the network's cost is about proportional)."""
+        return self.pixels / self.reference_pixels
+
+    def public(self) -> dict[str, object]:
+        """The plan as `GET /v1/cameras/{id}` reports it."""
+        return {
+            "input_wh": list(self.canvas_wh), "pixels": self.pixels,
+            "cost_ratio": round(self.cost_ratio, 3),
+            "bands": [{"inner_radius_px": round(b.inner_radius_px, 1), "radius_px": round(b.radius_px, 1),
+                       "scale": b.scale, "rows": b.rows, "pieces": b.pieces} for b in self.bands],
+            "smallest_person": {"along_px": round(self.smallest.along_px, 1),
+                                "across_px": round(self.smallest.across_px, 1),
+                                "radius_px": round(self.smallest.radius_px, 1),
+                                "distance_m": round(self.smallest.distance_m, 2)},
+            "notes": list(self.notes),
+        }
+
+
+def _ceil_to(value: float, step: int) -> int:
+    return max(step, int(math.ceil(value / step - 1e-9)) * step)
+
+
+def ring_radius_px(camera: FisheyeCamera, theta_deg: float) -> float:
+    """Frame px from the principal point to the ring θ = `theta_deg` (the lens's mean focal)."""
+    focal = (camera.focal_px[0] + camera.focal_px[1]) / 2
+    return focal * float(theta_to_radius(np.asarray([math.radians(theta_deg)]), camera.kb)[0])
+
+
+def farthest_corner_px(camera: FisheyeCamera) -> float:
+    """Frame px from the principal point to the frame's farthest corner."""
+    width, height = camera.image_size
+    u0, v0 = camera.principal_point
+    return max(math.hypot(u - u0, v - v0) for u in (-0.5, width - 0.5) for v in (-0.5, height - 0.5))
+
+
+def person_sizes(camera: FisheyeCamera, radii_px: FloatArray, config: ViewPlanConfig, directions: int = 24
+                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """For feet at (R,) frame radii: the smallest over `directions` rays of a standing adult's extent
+    along the ray (frame px) and across it (radians of screen angle), and the largest floor distance
+    (m); NaN where no ray in the frame has a floor point at that radius."""
+    u0, v0 = camera.principal_point
+    width, height = camera.image_size
+    angles = np.arange(directions) * TWO_PI / directions
+    feet = np.stack([u0 + radii_px[:, None] * np.cos(angles), v0 + radii_px[:, None] * np.sin(angles)], -1)
+    flat = feet.reshape(-1, 2)
+    inside = (flat[:, 0] >= -0.5) & (flat[:, 0] <= width - 0.5) & (flat[:, 1] >= -0.5) & (
+        flat[:, 1] <= height - 0.5)
+    floor = camera.pixels_to_floor(flat)  # (R D, 2) m, NaN past the horizon
+    distance = np.hypot(floor[:, 0], floor[:, 1])
+    altitude, tall = camera.altitude_m, config.person_height_m
+    if altitude > tall:
+        head_xyz = np.concatenate([floor, np.full((len(floor), 1), tall)], axis=1)
+        head = camera.world_to_pixels(head_xyz)
+        along = np.hypot(*(head - flat).T)
+    else:  # a camera below head height: the body runs out of the image, its lower part counts
+        along = np.full(len(flat), np.inf)
+    across = 2 * np.arctan2(config.person_width_m / 2, np.maximum(distance, 1e-6))
+    theta = np.arctan2(distance, camera.altitude_m)
+    bad = ~inside | ~np.isfinite(distance) | ~np.isfinite(along) | (theta > math.radians(config.floor_theta_deg))
+    along, across, distance = (np.where(bad, np.nan, a).reshape(len(radii_px), directions)
+                               for a in (along, across, distance))
+    with np.errstate(all="ignore"):
+        seen = ~np.all(np.isnan(along), axis=1)
+        return (np.where(seen, np.nanmin(np.where(np.isnan(along), np.inf, along), axis=1), np.nan),
+                np.where(seen, np.nanmin(np.where(np.isnan(across), np.inf, across), axis=1), np.nan),
+                np.where(seen, np.nanmax(np.where(np.isnan(distance), -np.inf, distance), axis=1), np.nan))
+
+
+def _needed_scale(along_px: FloatArray, across_rad: FloatArray, rows_per_px: float,
+                  reference: ViewReference, config: ViewPlanConfig) -> FloatArray:
+    """(R,) the scale over the trained strip at which the person reaches both targets."""
+    along_rows = along_px * rows_per_px
+    across_columns = across_rad * reference.turn_columns / TWO_PI
+    return np.maximum(config.target_along_px / along_rows, config.target_across_px / across_columns)
+
+
+def _layout(camera: FisheyeCamera, bands: list[ViewBand], reference: ViewReference, config: ViewPlanConfig
+            ) -> tuple[tuple[PolarGrid, ...], tuple[int, ...], tuple[int, int]]:
+    """Pieces of every band, stacked into one canvas of equal-width pieces."""
+    base = min(b.scale for b in bands)
+    piece_columns = reference.turn_columns * base / min(b.pieces for b in bands)
+    canvas_w = _ceil_to(piece_columns + reference.overlap, STRIDE)
+    overlap = canvas_w - int(round(piece_columns))
+    pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
+    grids: list[PolarGrid] = []
+    offsets: list[int] = []
+    row = 0
+    for band in bands:
+        turn = int(round(piece_columns)) * band.pieces
+        for k in range(band.pieces):
+            grids.append(PolarGrid(principal_point=pp, radius_px=band.radius_px, height=band.rows, width=turn,
+                                   overlap=min(overlap, turn), start_rad=TWO_PI * k / band.pieces,
+                                   inner_radius_px=band.inner_radius_px, span=int(round(piece_columns))))
+            offsets.append(row)
+            row += band.rows + config.gap_rows
+    canvas_h = _ceil_to(row - config.gap_rows, STRIDE)
+    return tuple(grids), tuple(offsets), (canvas_w, canvas_h)
+
+
+def plan_view(camera: FisheyeCamera, reference: ViewReference = ViewReference(),
+              config: ViewPlanConfig = ViewPlanConfig()) -> ViewPlan:
+    """The view of `camera`'s frames (the camera at the frames' size) for a model trained on
+    `reference`. ViewPlanError when no view can be made."""
+    width, height = camera.image_size
+    u0, v0 = camera.principal_point
+    if not (-0.5 <= u0 <= width - 0.5 and -0.5 <= v0 <= height - 0.5):
+        raise ViewPlanError(f"the principal point ({u0:g}, {v0:g}) lies outside the {width} x {height} frame")
+    ring = ring_radius_px(camera, reference.max_theta_deg)
+    top = min(ring_radius_px(camera, min(reference.max_theta_deg, camera.theta_max_deg)),
+              farthest_corner_px(camera))
+    if not (math.isfinite(top) and top >= 8):
+        raise ViewPlanError(f"the image circle ({top:.1f} px) leaves no view of the floor")
+    rows_per_px = reference.rows / ring  # the trained strip's rows per frame px of radius
+    radii = np.linspace(0.02 * top, top, 96)
+    along, across, distance = person_sizes(camera, radii, config)
+    seen = np.isfinite(along)
+    if not seen.any():
+        raise ViewPlanError("no floor point of the frame lies in view of the lens")
+    need = np.where(seen, _needed_scale(along, across, rows_per_px, reference, config), 0.0)
+    notes: list[str] = []
+    small, large = config.scales[0], config.scales[-1]
+    inner_scale = small
+    # The rim part where people fall below the targets at the trained scale; below the lens a
+    # person seen from above is short along the ray but large across, and stays in the inner band.
+    fits = np.nonzero(seen & (need <= small))[0]
+    beyond = np.nonzero(seen & (need > small) & (np.arange(len(radii)) > (fits[-1] if len(fits) else -1)))[0]
+    bands: list[ViewBand]
+    if len(beyond) == 0 or len(config.scales) == 1:
+        bands = [ViewBand(0.0, top, small, _ceil_to(small * rows_per_px * top, STRIDE // 2), 1)]
+    else:
+        split = float(radii[beyond[0]])
+        outer_scale = next((s for s in config.scales if s >= float(np.max(need[beyond]))), large)
+        # Each band reports the people centred in its own radii and shows everyone who may be:
+        # the inner band the whole disc (people near the lens lie long along the ray, reclining
+        # or seated ones most), the outer band from a person's length inside the split.
+        start = max(0.0, split - _person_length_px(camera, split, config))
+        inner = ViewBand(0.0, top, inner_scale, _ceil_to(inner_scale * rows_per_px * top, STRIDE // 2), 1,
+                         (0.0, split))
+        outer = ViewBand(start, top, outer_scale,
+                         _ceil_to(outer_scale * rows_per_px * (top - start), STRIDE // 2), 1,
+                         (split, math.inf))
+        bands = [inner, outer]
+    bands = _with_pieces(bands)
+    grids, offsets, canvas = _layout(camera, bands, reference, config)
+    while canvas[0] * canvas[1] > config.max_pixels and len(bands) == 2 and bands[1].scale > bands[0].scale:
+        lower = max(s for s in config.scales if s < bands[1].scale)
+        notes.append(f"budget {config.max_pixels} px binds: the outer band at scale {lower:g}, "
+                     f"not {bands[1].scale:g}")
+        outer = bands[1]
+        bands = _with_pieces([bands[0], ViewBand(outer.inner_radius_px, outer.radius_px, lower,
+                                                 _ceil_to(lower * rows_per_px * (outer.radius_px
+                                                                                - outer.inner_radius_px),
+                                                          STRIDE // 2), 1, outer.owned_px)])
+        if bands[1].scale == bands[0].scale:  # one band again
+            bands = _with_pieces([ViewBand(0.0, top, bands[0].scale, _ceil_to(
+                bands[0].scale * rows_per_px * top, STRIDE // 2), 1)])
+        grids, offsets, canvas = _layout(camera, bands, reference, config)
+    if canvas[0] * canvas[1] > config.max_pixels:
+        scale = bands[0].scale * math.sqrt(config.max_pixels / (canvas[0] * canvas[1]))
+        if scale < 0.25:
+            raise ViewPlanError(f"a budget of {config.max_pixels} px leaves under a quarter of the trained "
+                                f"scale for this camera (it needs {canvas[0] * canvas[1]} px at scale "
+                                f"{bands[0].scale:g})")
+        while True:  # rounding to the stride may leave it a little over: shrink until it fits
+            bands = [ViewBand(0.0, top, scale, _ceil_to(scale * rows_per_px * top, STRIDE // 2), 1)]
+            grids, offsets, canvas = _layout(camera, bands, reference, config)
+            if canvas[0] * canvas[1] <= config.max_pixels or scale < 0.25:
+                break
+            scale *= 0.97
+        notes.append(f"budget {config.max_pixels} px binds: one band at scale {scale:.2f}")
+    smallest = _smallest(bands, radii, (along, across, distance), rows_per_px, reference, config, seen)
+    if smallest.along_px < config.target_along_px or smallest.across_px < config.target_across_px:
+        notes.append(f"the smallest person ({smallest.along_px:.0f} x {smallest.across_px:.0f} px at "
+                     f"{smallest.distance_m:.1f} m) is below the target {config.target_along_px:g} x "
+                     f"{config.target_across_px:g} px")
+    if top < ring - 0.5:
+        notes.append(f"the frame cuts the image circle: the view reaches {top:.0f} of its {ring:.0f} px")
+    return ViewPlan(grids, offsets, canvas, tuple(bands), smallest, reference.pixels, tuple(notes))
+
+
+def _with_pieces(bands: list[ViewBand]) -> list[ViewBand]:
+    """Each band cut into as many equal-angle pieces as its scale holds the smallest band's."""
+    base = min(b.scale for b in bands)
+    unit = base if all(abs(b.scale / base - round(b.scale / base)) < 1e-6 for b in bands) else base / 2
+    return [ViewBand(b.inner_radius_px, b.radius_px, b.scale, b.rows, round(b.scale / unit), b.owned_px)
+            for b in bands]
+
+
+def _person_length_px(camera: FisheyeCamera, feet_radius_px: float, config: ViewPlanConfig) -> float:
+    """Frame px along the ray of a standing adult whose feet lie at `feet_radius_px` (the longest
+    over directions; the radius itself where no floor lies there)."""
+    along, _, _ = person_sizes(camera, np.asarray([feet_radius_px]), config)
+    return float(along[0]) if np.isfinite(along[0]) else feet_radius_px
+
+
+def _smallest(bands: list[ViewBand], radii: FloatArray, sizes: tuple[FloatArray, FloatArray, FloatArray],
+              rows_per_px: float, reference: ViewReference, config: ViewPlanConfig, seen: NDArray[np.bool_]
+              ) -> SmallestPerson:
+    """The smallest person over the view (against the targets), each radius read in the band of the
+    largest scale that holds it."""
+    along, across, distance = sizes
+    scale = np.zeros(len(radii))
+    for band in bands:
+        inside = (radii >= band.inner_radius_px) & (radii <= band.radius_px)
+        rows = band.rows / (band.radius_px - band.inner_radius_px) / rows_per_px
+        scale = np.where(inside, np.maximum(scale, rows), scale)
+    seen = seen & (distance >= config.person_height_m / 2)  # below the lens a person is seen from above
+    along_in = np.where(seen, along * rows_per_px * scale, np.inf)
+    across_in = np.where(seen, across * reference.turn_columns / TWO_PI * scale, np.inf)
+    worst = int(np.argmin(np.minimum(along_in / config.target_along_px, across_in / config.target_across_px)))
+    return SmallestPerson(float(along_in[worst]), float(across_in[worst]), float(radii[worst]),
+                          float(distance[worst]))
