@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from contract.metadata import ModelInfo
 from contract.model import RawOutputs
-from contract.views import InputMapping, min_decoded_side, prepare_input
+from contract.views import DEFAULT_VIEW, InputMapping, min_decoded_side, prepare_input
 from fisheye import FisheyeCamera, rotated_nms
 from fisheye.view_plan import ViewPlanConfig
 
@@ -136,7 +136,7 @@ class ModelRunner:
     """Decoded full-size frames with their cameras -> FrameDetections, as the service computes them."""
 
     def __init__(self, model: ContractModel, nms_iou: float | None = None, max_detections: int = 300,
-                 view: ViewPlanConfig = ViewPlanConfig()) -> None:
+                 view: ViewPlanConfig = DEFAULT_VIEW) -> None:
         self.model = model
         self.nms_iou = model.info.nms_iou if nms_iou is None else nms_iou  # None: the model's own
         self.max_detections = max_detections

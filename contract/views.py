@@ -30,6 +30,7 @@ from fisheye.polar import PolarGrid, unwrap_with_maps
 from fisheye.view_plan import ViewPlan, ViewPlanConfig, ViewReference, plan_view
 
 FloatArray = NDArray[np.float64]
+DEFAULT_VIEW = ViewPlanConfig()  # how a planned model's views are planned unless the caller says
 
 
 class InputMapping(Protocol):
@@ -165,13 +166,13 @@ def _cached_plan(reference: ViewReference, camera_json: str, config: ViewPlanCon
     return plan_view(FisheyeCamera.model_validate_json(camera_json), reference, config)
 
 
-def view_plan(info: ModelInfo, camera: FisheyeCamera, config: ViewPlanConfig = ViewPlanConfig()) -> ViewPlan:
+def view_plan(info: ModelInfo, camera: FisheyeCamera, config: ViewPlanConfig = DEFAULT_VIEW) -> ViewPlan:
     """The planned view of a planned model for frames of `camera` (at the frames' size), made once
     per camera, model and budget. `fisheye.view_plan.ViewPlanError` when none can be made."""
     return _cached_plan(view_reference(info), camera.model_dump_json(), config)
 
 
-def min_decoded_side(info: ModelInfo, camera: FisheyeCamera, config: ViewPlanConfig = ViewPlanConfig()) -> int:
+def min_decoded_side(info: ModelInfo, camera: FisheyeCamera, config: ViewPlanConfig = DEFAULT_VIEW) -> int:
     """The smallest long side (px) a reduced decode of `camera`'s frame may have for this model:
     the letterbox's side, or for a polar strip one frame pixel per strip row along the radius (for
     a planned view, per row of its densest band)."""
@@ -194,7 +195,7 @@ def _cached_maps(grid: PolarGrid, scale_xy: tuple[float, float]) -> tuple[NDArra
 
 
 def prepare_input(info: ModelInfo, rgb: NDArray[np.uint8], camera: FisheyeCamera,
-                  config: ViewPlanConfig = ViewPlanConfig()) -> tuple[NDArray[np.uint8], InputMapping]:
+                  config: ViewPlanConfig = DEFAULT_VIEW) -> tuple[NDArray[np.uint8], InputMapping]:
     """A frame of `camera` (scaled to the frame's full size), decoded as `rgb` (h, w, 3) at full or
     reduced scale -> the model's input (H, W, 3) uint8 and the mapping of its px to the frame's
     (a planned model's view planned with `config`)."""
@@ -249,7 +250,8 @@ class PlannedInput:
 
     def usable(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
         sized = (boxes[:, 2] > boxes[:, 0]) & (boxes[:, 3] > boxes[:, 1])
-        centre_rows = (np.asarray(boxes, dtype=np.float64)[:, 1] + np.asarray(boxes, dtype=np.float64)[:, 3]) / 2
+        xyxy = np.asarray(boxes, dtype=np.float64)
+        centre_rows = (xyxy[:, 1] + xyxy[:, 3]) / 2
         piece = self._piece_of(centre_rows)
         offsets = np.asarray(self.plan.row_offsets, dtype=np.float64)[piece]
         owned = np.zeros(len(boxes), dtype=bool)

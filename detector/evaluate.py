@@ -10,6 +10,7 @@ the assumed camera of DESIGN.md. Metrics are those of `detector.metrics`, overal
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -34,6 +35,7 @@ from contract import (
     SessionThreads,
 )
 from contract.detect import ContractModel
+from contract.views import DEFAULT_VIEW
 from detector.checkpoint import CheckpointError, load_checkpoint
 from detector.data.dataset import load_rgb
 from detector.data.readers import DatasetFormatError, FrameAnnotations, read_dataset
@@ -226,6 +228,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="choose the NMS IoU and threshold of best F1 on this data (validation "
                              "renders only) and report there; each IoU's point goes into the JSON")
     parser.add_argument("--limit", type=int, default=None, help="evaluate the first N frames only")
+    parser.add_argument("--max-view-pixels", type=int, default=None,
+                        help="a planned model's view budget, as fishloc serve --max-view-pixels")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -246,7 +250,9 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps({"operating_point": describe([best])[0]}))
         extra["operating_points"] = describe(points)
     else:
-        predictor = RunnerPredictor(ModelRunner(model, args.nms_iou))
+        view = DEFAULT_VIEW if args.max_view_pixels is None else dataclasses.replace(
+            DEFAULT_VIEW, max_pixels=args.max_view_pixels)
+        predictor = RunnerPredictor(ModelRunner(model, args.nms_iou, view=view))
         if args.min_score is not None:
             predictor.default_min_score = args.min_score
         evaluation = evaluate(predictor, frames, progress=True)

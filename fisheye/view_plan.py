@@ -65,7 +65,7 @@ class ViewPlanConfig:
     target_across_px: float = 48.0
     scales: tuple[float, ...] = (1.0, 1.5)
     floor_theta_deg: float = 80.0  # people are planned for up to this angle from the axis (17 m at 3 m)
-    max_pixels: int = 2_000_000
+    max_pixels: int = 1_000_000  # about 0.5.0's strip (745 472 px): its latency
     gap_rows: int = STRIDE
 
     def __post_init__(self) -> None:
@@ -146,7 +146,7 @@ class ViewPlan:
 
 
 def _ceil_to(value: float, step: int) -> int:
-    return max(step, int(math.ceil(value / step - 1e-9)) * step)
+    return max(step, math.ceil(value / step - 1e-9) * step)
 
 
 def ring_radius_px(camera: FisheyeCamera, theta_deg: float) -> float:
@@ -185,7 +185,8 @@ def person_sizes(camera: FisheyeCamera, radii_px: FloatArray, config: ViewPlanCo
         along = np.full(len(flat), np.inf)
     across = 2 * np.arctan2(config.person_width_m / 2, np.maximum(distance, 1e-6))
     theta = np.arctan2(distance, camera.altitude_m)
-    bad = ~inside | ~np.isfinite(distance) | ~np.isfinite(along) | (theta > math.radians(config.floor_theta_deg))
+    beyond = theta > math.radians(config.floor_theta_deg)
+    bad = ~inside | ~np.isfinite(distance) | ~np.isfinite(along) | beyond
     along, across, distance = (np.where(bad, np.nan, a).reshape(len(radii_px), directions)
                                for a in (along, across, distance))
     with np.errstate(all="ignore"):
@@ -209,27 +210,30 @@ def _layout(camera: FisheyeCamera, bands: list[ViewBand], reference: ViewReferen
     base = min(b.scale for b in bands)
     piece_columns = reference.turn_columns * base / min(b.pieces for b in bands)
     canvas_w = _ceil_to(piece_columns + reference.overlap, STRIDE)
-    overlap = canvas_w - int(round(piece_columns))
+    overlap = canvas_w - round(piece_columns)
     pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
     grids: list[PolarGrid] = []
     offsets: list[int] = []
     row = 0
     for band in bands:
-        turn = int(round(piece_columns)) * band.pieces
+        turn = round(piece_columns) * band.pieces
         for k in range(band.pieces):
             grids.append(PolarGrid(principal_point=pp, radius_px=band.radius_px, height=band.rows, width=turn,
                                    overlap=min(overlap, turn), start_rad=TWO_PI * k / band.pieces,
-                                   inner_radius_px=band.inner_radius_px, span=int(round(piece_columns))))
+                                   inner_radius_px=band.inner_radius_px, span=round(piece_columns)))
             offsets.append(row)
             row += band.rows + config.gap_rows
     canvas_h = _ceil_to(row - config.gap_rows, STRIDE)
     return tuple(grids), tuple(offsets), (canvas_w, canvas_h)
 
 
-def plan_view(camera: FisheyeCamera, reference: ViewReference = ViewReference(),
-              config: ViewPlanConfig = ViewPlanConfig()) -> ViewPlan:
+def plan_view(camera: FisheyeCamera, reference: ViewReference | None = None,
+              config: ViewPlanConfig | None = None) -> ViewPlan:
     """The view of `camera`'s frames (the camera at the frames' size) for a model trained on
-    `reference`. ViewPlanError when no view can be made."""
+    `reference` (default: 0.2's strip), planned with `config` (default: `ViewPlanConfig()`).
+    ViewPlanError when no view can be made."""
+    reference = reference or ViewReference()
+    config = config or ViewPlanConfig()
     width, height = camera.image_size
     u0, v0 = camera.principal_point
     if not (-0.5 <= u0 <= width - 0.5 and -0.5 <= v0 <= height - 0.5):
@@ -302,8 +306,10 @@ def plan_view(camera: FisheyeCamera, reference: ViewReference = ViewReference(),
         notes.append(f"the smallest person ({smallest.along_px:.0f} x {smallest.across_px:.0f} px at "
                      f"{smallest.distance_m:.1f} m) is below the target {config.target_along_px:g} x "
                      f"{config.target_across_px:g} px")
-    if top < ring - 0.5:
-        notes.append(f"the frame cuts the image circle: the view reaches {top:.0f} of its {ring:.0f} px")
+    edge = min(u0 + 0.5, width - 0.5 - u0, v0 + 0.5, height - 0.5 - v0)
+    if ring > edge + 0.5:
+        notes.append(f"the frame cuts the image circle ({ring:.0f} px radius, {edge:.0f} px to the nearest "
+                     f"edge): the view reaches {top:.0f} px, the frame's corners included")
     return ViewPlan(grids, offsets, canvas, tuple(bands), smallest, reference.pixels, tuple(notes))
 
 

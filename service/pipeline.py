@@ -26,7 +26,9 @@ from contract import (
     prepare_input,
 )
 from contract import select_detections as select_raw
+from contract.views import DEFAULT_VIEW, view_plan
 from fisheye import FisheyeCamera, cxcywh_to_corners, foot_points, radial_angles_rad
+from fisheye.view_plan import ViewPlan, ViewPlanConfig, ViewPlanError
 from service.frame_decode import DecodedFrame, FrameError, check_frame_size, decode_frame, read_header
 from service.result import DetectionResult, Detections
 
@@ -43,6 +45,7 @@ class PipelineConfig:
     max_detections: int = 300
     max_pixels: int = 40_000_000
     min_frame_side_px: int = 16  # smaller frames cannot show a person; refused, not guessed at
+    view: ViewPlanConfig = DEFAULT_VIEW  # how a planned model's views are planned (its budget)
 
     def __post_init__(self) -> None:
         if self.nms_iou is not None and not 0.0 < self.nms_iou <= 1.0:
@@ -115,10 +118,14 @@ class Pipeline:
             frame_camera = camera.scaled_to(header.size_wh)
         except ValueError as error:
             raise FrameError("frame_size_mismatch", str(error)) from None
-        frame = decode_frame(data, min_decoded_side(self.info, frame_camera), self.config.max_pixels, header)
+        try:
+            smallest_side = min_decoded_side(self.info, frame_camera, self.config.view)
+        except ViewPlanError as error:
+            raise FrameError("view_unplannable", f"camera {camera.id}: {error}") from None
+        frame = decode_frame(data, smallest_side, self.config.max_pixels, header)
         decoded = time.perf_counter()
 
-        image, mapping = prepare_input(self.info, frame.rgb, frame_camera)
+        image, mapping = prepare_input(self.info, frame.rgb, frame_camera, self.config.view)
         preprocessed = time.perf_counter()
 
         raw = self.model.run(image)
@@ -143,6 +150,13 @@ class Pipeline:
         log.debug("frame %s of %s: %d detections in %.1f ms", frame_id, camera.id, len(detections.scores),
                   timing_ms["total"], extra={"camera_id": camera.id, "frame_id": frame_id})
         return result, frame
+
+    def plan(self, camera: FisheyeCamera) -> ViewPlan | None:
+        """The view planned for `camera`'s frames at its own image size (None: the model's view is
+        fixed). ViewPlanError when none can be made."""
+        if not self.info.planned:
+            return None
+        return view_plan(self.info, camera, self.config.view)
 
     def select(self, raw: RawOutputs, mapping: InputMapping, threshold: float,
                camera: FisheyeCamera) -> FrameDetections:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import contextvars
+import dataclasses
 import logging
 import threading
 import time
@@ -20,6 +21,7 @@ from dataclasses import dataclass
 import cv2
 
 from contract import OnnxModel, SessionThreads
+from contract.views import DEFAULT_VIEW
 from fisheye import FisheyeCamera
 from service.core.config import Settings
 from service.core.metrics import ServiceMetrics
@@ -156,7 +158,9 @@ def build_runner(settings: Settings, metrics: ServiceMetrics) -> InferenceRunner
     # compete with both for the same cores.
     cv2.setNumThreads(1)
     model = OnnxModel(settings.model, SessionThreads(intra_op=settings.threads, inter_op=1))
-    pipeline = Pipeline(model, PipelineConfig(nms_iou=settings.nms_iou, max_pixels=settings.max_pixels))
+    view = dataclasses.replace(DEFAULT_VIEW, max_pixels=settings.max_view_pixels)
+    pipeline = Pipeline(model, PipelineConfig(nms_iou=settings.nms_iou, max_pixels=settings.max_pixels,
+                                              view=view))
     config = RunnerConfig(threads=settings.threads, max_in_flight=settings.in_flight_limit,
                           retry_after_s=settings.retry_after_s)
     return InferenceRunner(pipeline, config, metrics)

@@ -38,11 +38,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threads", type=int, help="inference threads (default: the container's CPU quota)")
     parser.add_argument("--no-demo-camera", dest="demo_camera", action="store_const", const=False,
                         help="do not add the demo camera to a new database")
+    parser.add_argument("--max-view-pixels", type=int, metavar="PIXELS",
+                        help="largest model input of a camera's planned view, width x height (a planned "
+                             "model only; env FISHLOC_MAX_VIEW_PIXELS; default 1000000)")
 
 
 def settings_from_args(args: argparse.Namespace) -> Settings:
     """Settings from the environment with the flags that were given on top."""
-    names = ("host", "http_port", "grpc_port", "model", "cameras", "database", "threads", "demo_camera")
+    names = ("host", "http_port", "grpc_port", "model", "cameras", "database", "threads", "demo_camera",
+             "max_view_pixels")
     overrides = {name: getattr(args, name) for name in names if getattr(args, name, None) is not None}
     return Settings(**overrides)
 

@@ -96,7 +96,7 @@ class PolarContract(nn.Module):
         self.peaks = peaks
 
     def forward(self, image: Tensor) -> tuple[Tensor, ...]:
-        cxcywh, scores, foot = top_people(self.net, image, self.max_detections, self.peaks)  # (N, K, 4), (N, K)
+        cxcywh, scores, foot = top_people(self.net, image, self.max_detections, self.peaks)  # (N, K, 4)
         centre, half = cxcywh[..., :2] - EDGE_TO_CENTRE_PX, cxcywh[..., 2:] / 2
         boxes = torch.cat([centre - half, centre + half], dim=-1)
         if foot is None:

@@ -21,6 +21,7 @@ FRAME_ERROR_STATUS = {
     "image_too_large": 413,
     "frame_size_mismatch": 422,
     "frame_too_small": 422,
+    "view_unplannable": 422,
 }
 
 _STATUS_CODES = {

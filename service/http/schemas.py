@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
 
 from fisheye import FisheyeCamera
 
@@ -102,6 +102,13 @@ class CalibrationFit(BaseModel):
     theta_max_marked_deg: float
     monotonic_constrained: bool
     notes: list[FitNote]
+
+
+class CameraView(FisheyeCamera):
+    """A camera record with the view planned for its frames (a planned model only)."""
+
+    model_config = ConfigDict(extra="allow")
+    view: dict[str, Any] | None = None
 
 
 class CameraList(BaseModel):

@@ -107,3 +107,39 @@ def test_invalid_grids_are_refused(kwargs: dict[str, float]) -> None:
     base = dict(principal_point=(10.0, 10.0), radius_px=10.0, height=8, width=32, overlap=0)
     with pytest.raises(ValueError):
         PolarGrid(**{**base, **kwargs})  # type: ignore[arg-type]
+
+
+RING_PIECE = PolarGrid(principal_point=(511.5, 500.0), radius_px=480.0, height=64, width=768, overlap=32,
+                       start_rad=math.pi / 2, inner_radius_px=200.0, span=256)
+
+
+@pytest.mark.parametrize("points", [np.zeros((0, 2)), np.array([[0.0, 0.0], [255.0, 63.0], [100.2, 40.7]])])
+def test_ring_piece_round_trip(points: np.ndarray) -> None:
+    # A piece of a ring: its columns are the turn's from start_rad, its rows the ring's radii.
+    back = RING_PIECE.frame_to_strip(RING_PIECE.strip_to_frame(points))
+    assert back.shape == points.shape
+    np.testing.assert_allclose(back, points, atol=1e-9)
+
+
+def test_ring_piece_edges_by_formula() -> None:
+    uv = RING_PIECE.strip_to_frame(np.array([[-0.5, -0.5], [-0.5, 63.5]]))
+    # Column -0.5 is the start angle (a quarter turn: straight down on screen); the top edge the
+    # outer radius, the bottom edge the inner one.
+    np.testing.assert_allclose(uv[0], [511.5, 500.0 + 480.0], atol=1e-9)
+    np.testing.assert_allclose(uv[1], [511.5, 500.0 + 200.0], atol=1e-9)
+    assert RING_PIECE.strip_wh == (256 + 32, 64)
+    assert RING_PIECE.px_per_radius_px == pytest.approx(64 / 280.0)
+
+
+def test_ring_piece_boxes_round_trip() -> None:
+    strip = np.array([[10.0, 5.0, 40.0, 50.0], [100.0, 0.0, 130.0, 30.0]])
+    frame = RING_PIECE.polar_to_radius_aligned(strip)
+    np.testing.assert_allclose(RING_PIECE.radius_aligned_to_polar(frame), strip, atol=1e-6)
+
+
+@pytest.mark.parametrize(("field", "value"), [("inner_radius_px", 480.0), ("inner_radius_px", -1.0),
+                                              ("span", 769), ("span", -1)])
+def test_ring_piece_refuses_bad_geometry(field: str, value: float) -> None:
+    with pytest.raises(ValueError, match=field):
+        PolarGrid(principal_point=(0.0, 0.0), radius_px=480.0, height=64, width=768,
+                  **{field: value})  # type: ignore[arg-type]

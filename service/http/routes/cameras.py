@@ -7,12 +7,13 @@ from typing import Any
 from fastapi import APIRouter, Path, Request, Response, status
 from starlette.concurrency import run_in_threadpool
 
-from fisheye import CalibrationError, FisheyeCamera, camera_to_dict
+from fisheye import CalibrationError, FisheyeCamera, camera_from_dict, camera_to_dict
 from fisheye.camera import CAMERA_ID_PATTERN
+from fisheye.view_plan import ViewPlan, ViewPlanError
 from service.core.errors import ApiError
-from service.http.dependencies import State, WriteAccess
+from service.http.dependencies import ServiceState, State, WriteAccess
 from service.http.request_body import BodyLimits, read_json_object
-from service.http.schemas import CameraList, error_responses
+from service.http.schemas import CameraList, CameraView, error_responses
 
 router = APIRouter(tags=["cameras"])
 
@@ -40,13 +41,28 @@ async def list_cameras(state: State) -> dict[str, list[dict[str, Any]]]:
     return {"cameras": [camera_to_dict(camera) for camera in cameras]}
 
 
-@router.get("/v1/cameras/{camera_id}", response_model=FisheyeCamera, response_model_exclude_none=True,
-            responses=error_responses(404, 422), summary="One camera's calibration record")
+@router.get("/v1/cameras/{camera_id}", response_model=CameraView, response_model_exclude_none=True,
+            responses=error_responses(404, 422), summary="One camera's calibration record",
+            description="With a planned model, `view` is the view planned for the camera's frames: the "
+                        "model input (`input_wh`, `pixels`, `cost_ratio` against the trained strip), its "
+                        "bands, the smallest person in input px and where, and notes (a budget that binds).")
 async def get_camera(state: State, camera_id: str = CameraId) -> dict[str, Any]:
     camera = await run_in_threadpool(state.registry.get, camera_id)
     if camera is None:
         raise not_found(camera_id)
-    return camera_to_dict(camera)
+    record = camera_to_dict(camera)
+    plan = await run_in_threadpool(_plan_or_refuse, state, camera)
+    if plan is not None:
+        record["view"] = plan.public()
+    return record
+
+
+def _plan_or_refuse(state: ServiceState, camera: FisheyeCamera) -> ViewPlan | None:
+    """The view planned for `camera` (None for a model of a fixed view); 422 when none can be made."""
+    try:
+        return state.runner.pipeline.plan(camera)
+    except ViewPlanError as error:
+        raise ApiError(422, "view_unplannable", f"camera {camera.id}: {error}") from None
 
 
 @router.put(
@@ -63,6 +79,11 @@ async def put_camera(request: Request, response: Response, state: State,
                      camera_id: str = CameraId) -> dict[str, Any]:
     limits = BodyLimits(_MAX_RECORD_BYTES, state.settings.body_timeout_s)
     record = await read_json_object(request, limits, "a camera record", "invalid_camera")
+    try:
+        candidate = camera_from_dict({**record, "id": record.get("id", camera_id)})
+    except CalibrationError as error:
+        raise ApiError(422, "invalid_camera", str(error)) from None
+    await run_in_threadpool(_plan_or_refuse, state, candidate)  # nothing is saved for an unplannable view
     try:
         outcome = await run_in_threadpool(state.registry.put_record, camera_id, record)
     except CalibrationError as error:

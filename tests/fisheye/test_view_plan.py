@@ -1,0 +1,99 @@
+"""The planned view of a camera: bands, pieces, the canvas, budgets and refusals."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from fisheye import assumed_camera, load_camera
+from fisheye.view_plan import ViewPlanConfig, ViewPlanError, ViewReference, person_sizes, plan_view
+
+DEMO = load_camera("models/demo_camera.yaml")
+LARGE = ViewPlanConfig(max_pixels=4_000_000)
+
+
+def test_default_budget_keeps_the_trained_strip() -> None:
+    plan = plan_view(DEMO)
+    assert len(plan.bands) == 1 and plan.bands[0].scale == 1.0
+    assert plan.canvas_wh == (1664 + 128, 416)
+    assert plan.cost_ratio == pytest.approx(1.0)
+    assert any("budget" in note for note in plan.notes)
+
+
+def test_large_budget_plans_a_larger_outer_band() -> None:
+    plan = plan_view(DEMO, config=LARGE)
+    inner, outer = plan.bands
+    assert (inner.scale, outer.scale) == (1.0, 1.5)
+    assert inner.inner_radius_px == 0 and inner.radius_px == outer.radius_px
+    # The bands report disjoint radii that cover the whole view, split where the outer one starts
+    # to be needed; the outer band shows people centred just past the split whole.
+    assert inner.owned_px[1] == outer.owned_px[0]
+    assert outer.inner_radius_px < outer.owned_px[0]
+    assert (inner.pieces, outer.pieces) == (2, 3)
+    width, height = plan.canvas_wh
+    assert width % 32 == 0 and height % 32 == 0 and plan.pixels <= LARGE.max_pixels
+    # Pieces sit one below another without overlapping, each inside the canvas.
+    ends = [offset + grid.height for offset, grid in zip(plan.row_offsets, plan.grids, strict=True)]
+    assert all(end <= start for end, start in zip(ends, plan.row_offsets[1:], strict=False))
+    assert ends[-1] <= height and all(grid.strip_wh[0] <= width for grid in plan.grids)
+    # Each band's pieces cover the turn once, at equal angles.
+    starts = sorted(round(grid.start_rad, 9) for grid in plan.grids[2:])
+    np.testing.assert_allclose(starts, [0, 2 * math.pi / 3, 4 * math.pi / 3])
+
+
+def test_the_outer_band_keeps_the_trained_shape() -> None:
+    plan = plan_view(DEMO, config=LARGE)
+    reference = ViewReference()
+    for band, grid in ((plan.bands[0], plan.grids[0]), (plan.bands[1], plan.grids[2])):
+        column_scale = grid.width / reference.turn_columns
+        row_scale = grid.px_per_radius_px / (reference.rows / plan.bands[0].radius_px)
+        assert column_scale == pytest.approx(band.scale)
+        assert row_scale == pytest.approx(band.scale, rel=0.08)  # rows are rounded to 16
+
+
+def test_people_shrink_towards_the_rim() -> None:
+    radii = np.linspace(300, 850, 8)  # feet up to the planned floor (θ ≤ 80°)
+    along, across, distance = person_sizes(DEMO, radii, ViewPlanConfig())
+    assert np.all(np.diff(distance) > 0)
+    assert np.all(np.diff(across) < 0)
+    assert along[-1] < along[3]
+
+
+def test_a_budget_that_binds_shrinks_the_view_and_says_so() -> None:
+    small = ViewPlanConfig(max_pixels=300_000)
+    plan = plan_view(DEMO, config=small)
+    assert plan.pixels <= 300_000
+    assert plan.bands[0].scale < 1.0
+    assert any("binds" in note for note in plan.notes)
+
+
+def test_wide_circle_reaches_the_frame_corners() -> None:
+    # A 1696 x 1080 frame whose 180° circle is 1680 px across: cut at its top and bottom.
+    camera = assumed_camera(1696, 1080).model_copy(update={"focal_px": (534.76, 534.76)})
+    plan = plan_view(camera)
+    assert plan.bands[-1].radius_px == pytest.approx(534.76 * math.pi / 2)
+    assert any("cuts the image circle" in note for note in plan.notes)
+
+
+@pytest.mark.parametrize(("update", "reason"), [
+    ({"principal_point": (5000.0, 500.0)}, "outside"),
+])
+def test_unplannable_cameras_are_refused(update: dict[str, object], reason: str) -> None:
+    camera = DEMO.model_copy(update=update)
+    with pytest.raises(ViewPlanError, match=reason):
+        plan_view(camera)
+
+
+def test_a_budget_below_any_view_is_refused() -> None:
+    with pytest.raises(ViewPlanError, match="budget"):
+        plan_view(DEMO, config=ViewPlanConfig(max_pixels=4096))
+
+
+@pytest.mark.parametrize("kwargs", [{"scales": ()}, {"scales": (1.5, 1.0)}, {"max_pixels": 10},
+                                    {"target_along_px": 0.0}, {"person_height_m": 4.0}])
+def test_config_refuses_nonsense(kwargs: dict[str, object]) -> None:
+    with pytest.raises(ValueError):
+        ViewPlanConfig(**kwargs)  # type: ignore[arg-type]
