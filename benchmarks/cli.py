@@ -15,14 +15,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from benchmarks.frames import (
-    FrameSet,
-    FrameSpec,
-    load_frames,
-    make_frames,
-    make_synth_frames,
-    synth_available,
-)
+from benchmarks.frames import FrameSet, bench_frames
 from benchmarks.grpc_streams import grpc_unavailable_reason, stream_cameras
 from benchmarks.http_load import concurrent_clients, single_client
 from benchmarks.machine import load_average, machine_info, model_description
@@ -84,19 +77,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     sweep.add_arguments(commands.add_parser("sweep", help="latency (and AP50) per input size and precision"))
     profile.add_arguments(commands.add_parser("profile", help="where a frame's time goes (pyinstrument)"))
-
-
-def bench_frames(args: argparse.Namespace, progress: Any = print) -> FrameSet:
-    if args.frames is not None:
-        return load_frames(args.frames)
-    spec = FrameSpec(size=args.frame_size, count=args.frame_count)
-    renderer = args.renderer or ("synth" if synth_available() else "procedural")
-    if renderer == "synth":
-        progress(f"frames: {spec.count} unseen {spec.size}×{spec.size} scenes by `fishloc synth` "
-                 "(rendered once, then cached; minutes on 2 cores)")
-        return load_frames(make_synth_frames(spec, camera_path=args.camera))
-    progress(f"frames: rendering/caching {spec.count} procedural {spec.size}×{spec.size} JPEGs ({spec.key})")
-    return load_frames(make_frames(spec))
 
 
 def frames_description(frames: FrameSet) -> dict[str, object]:

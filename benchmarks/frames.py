@@ -14,10 +14,12 @@ black outside the image circle and per-pixel sensor noise, encoded as camera fir
 
 from __future__ import annotations
 
+import argparse
 import math
 import shutil
 import subprocess
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -227,3 +229,18 @@ def load_frames(folder: str | Path, limit: int | None = None) -> FrameSet:
         raise ValueError(f"the frames of {root} have several sizes {sorted(sizes)}; use frames of one camera")
     (width, height), = sizes
     return FrameSet(str(root), tuple(p.name for p in files), data, width, height)
+
+
+def bench_frames(args: argparse.Namespace, progress: Callable[[str], object] = print) -> FrameSet:
+    """The frames a benchmark run uses: `--frames DIR`, or rendered (and cached) per `--frame-size`,
+    `--frame-count`, `--renderer` and `--camera`."""
+    if args.frames is not None:
+        return load_frames(args.frames)
+    spec = FrameSpec(size=args.frame_size, count=args.frame_count)
+    renderer = args.renderer or ("synth" if synth_available() else "procedural")
+    if renderer == "synth":
+        progress(f"frames: {spec.count} unseen {spec.size}×{spec.size} scenes by `fishloc synth` "
+                 "(rendered once, then cached; minutes on 2 cores)")
+        return load_frames(make_synth_frames(spec, camera_path=args.camera))
+    progress(f"frames: rendering/caching {spec.count} procedural {spec.size}×{spec.size} JPEGs ({spec.key})")
+    return load_frames(make_frames(spec))

@@ -11,6 +11,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from benchmarks.frames import bench_frames
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frames-to-profile", type=int, default=60, help="frames to run (default 60)")
@@ -24,7 +26,6 @@ def run(args: argparse.Namespace) -> int:
     except ImportError:
         print("fishloc bench profile needs pyinstrument: pip install 'fishloc[dev]'", file=sys.stderr)
         return 2
-    from benchmarks.cli import bench_frames
     from benchmarks.inprocess import service_pipeline
     from fisheye import load_camera
     from service.core.cpu import cpu_budget

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.checkout import checkout_env, source_root
+from benchmarks.frames import bench_frames
 from benchmarks.stats import Summary, summarize
 
 QUANTIZED_OPS = frozenset({"QuantizeLinear", "DequantizeLinear", "QLinearConv", "ConvInteger"})
@@ -88,7 +89,6 @@ def evaluate_ap50(model: Path, eval_data: Path | None) -> tuple[float | None, st
 
 
 def run(args: argparse.Namespace) -> int:
-    from benchmarks.cli import bench_frames
     from benchmarks.inprocess import service_pipeline
     from benchmarks.machine import machine_info
     from fisheye import load_camera

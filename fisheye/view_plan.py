@@ -65,6 +65,9 @@ class ViewPlanConfig:
     target_across_px: float = 48.0
     scales: tuple[float, ...] = (1.0, 1.5)
     floor_theta_deg: float = 80.0  # people are planned for up to this angle from the axis (17 m at 3 m)
+    # Each band shows this many standing adults' lengths (at the split) past the radii it reports,
+    # so a person centred there is whole in it; None: the inner band shows the whole disc.
+    band_margin: float | None = None
     max_pixels: int = 1_000_000  # about 0.5.0's strip (745 472 px): its latency
     gap_rows: int = STRIDE
 
@@ -266,8 +269,11 @@ def plan_view(camera: FisheyeCamera, reference: ViewReference | None = None,
         # Each band reports the people centred in its own radii and shows everyone who may be:
         # the inner band the whole disc (people near the lens lie long along the ray, reclining
         # or seated ones most), the outer band from a person's length inside the split.
-        start = max(0.0, split - _person_length_px(camera, split, config))
-        inner = ViewBand(0.0, top, inner_scale, _ceil_to(inner_scale * rows_per_px * top, STRIDE // 2), 1,
+        length = _person_length_px(camera, split, config)
+        margin = length if config.band_margin is None else config.band_margin * length
+        start = max(0.0, split - margin)
+        reach = top if config.band_margin is None else min(top, split + margin)
+        inner = ViewBand(0.0, reach, inner_scale, _ceil_to(inner_scale * rows_per_px * reach, STRIDE // 2), 1,
                          (0.0, split))
         outer = ViewBand(start, top, outer_scale,
                          _ceil_to(outer_scale * rows_per_px * (top - start), STRIDE // 2), 1,
