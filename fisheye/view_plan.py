@@ -296,10 +296,10 @@ def plan_view(camera: FisheyeCamera, reference: ViewReference | None = None,
         grids, offsets, canvas = _layout(camera, bands, reference, config)
     if canvas[0] * canvas[1] > config.max_pixels:
         scale = bands[0].scale * math.sqrt(config.max_pixels / (canvas[0] * canvas[1]))
-        if scale < 0.25:
+        if scale < 0.25 or scale * rows_per_px * top < 2 * STRIDE:  # fewer rows show nobody
             raise ViewPlanError(f"a budget of {config.max_pixels} px leaves under a quarter of the trained "
-                                f"scale for this camera (it needs {canvas[0] * canvas[1]} px at scale "
-                                f"{bands[0].scale:g})")
+                                f"scale or under {2 * STRIDE} rows for this camera (it needs "
+                                f"{canvas[0] * canvas[1]} px at scale {bands[0].scale:g})")
         while True:  # rounding to the stride may leave it a little over: shrink until it fits
             bands = [ViewBand(0.0, top, scale, _ceil_to(scale * rows_per_px * top, STRIDE // 2), 1)]
             grids, offsets, canvas = _layout(camera, bands, reference, config)

@@ -28,15 +28,43 @@ def _const(name: str, value: np.ndarray) -> onnx.NodeProto:
     return helper.make_node("Constant", [], [name], value=numpy_helper.from_array(value, name))
 
 
+def _coordinate_nodes(planned: bool, height: int, width: int) -> list[onnx.NodeProto]:
+    """`xs`, `ys`: each input pixel's column and row, fixed for a strip, from the input's shape for
+    a planned view (any height and width)."""
+    if not planned:
+        rows, cols = np.mgrid[0:height, 0:width].astype(np.float32)
+        return [_const("xs", cols), _const("ys", rows)]
+    return [
+        helper.make_node("Shape", ["image"], ["shape"]),
+        _const("i1", np.array([1], dtype=np.int64)), _const("i2", np.array([2], dtype=np.int64)),
+        _const("i3", np.array([3], dtype=np.int64)),
+        _const("zero", np.array(0, dtype=np.int64)), _const("one", np.array(1, dtype=np.int64)),
+        helper.make_node("Slice", ["shape", "i1", "i2"], ["h1"]),
+        helper.make_node("Slice", ["shape", "i2", "i3"], ["w1"]),
+        helper.make_node("Squeeze", ["h1"], ["h"]), helper.make_node("Squeeze", ["w1"], ["w"]),
+        helper.make_node("Range", ["zero", "h", "one"], ["row_i"]),
+        helper.make_node("Range", ["zero", "w", "one"], ["col_i"]),
+        helper.make_node("Cast", ["row_i"], ["row_f"], to=TensorProto.FLOAT),
+        helper.make_node("Cast", ["col_i"], ["col_f"], to=TensorProto.FLOAT),
+        _const("row_shape", np.array([-1, 1], dtype=np.int64)),
+        helper.make_node("Reshape", ["row_f", "row_shape"], ["row_col"]),  # (H, 1)
+        helper.make_node("Mul", ["row_col", "col_f"], ["zero_hw"]),  # (H, W), used for its shape
+        _const("f0", np.array(0.0, dtype=np.float32)),
+        helper.make_node("Mul", ["zero_hw", "f0"], ["zeros"]),
+        helper.make_node("Add", ["zeros", "col_f"], ["xs"]),
+        helper.make_node("Add", ["zeros", "row_col"], ["ys"]),
+    ]
+
+
 def build_polar_double(foot: bool = False, bad_foot: bool = False,
-                       metadata: dict[str, str] | None = None) -> onnx.ModelProto:
-    """The double; `bad_foot` gives it a `foot` output of 4 numbers per box (the contract says 2)."""
+                       metadata: dict[str, str] | None = None, planned: bool = False) -> onnx.ModelProto:
+    """The double; `bad_foot` gives it a `foot` output of 4 numbers per box (the contract says 2);
+    `planned`, an input of any height and width (`fishloc.view_planned`)."""
     width = WIDTH + OVERLAP
-    rows, cols = np.mgrid[0:HEIGHT, 0:width].astype(np.float32)
     f32 = np.float32
     half = np.array([-BOX_WH[0] / 2, -BOX_WH[1] / 2, BOX_WH[0] / 2, BOX_WH[1] / 2], dtype=f32)
     nodes = [
-        _const("xs", cols), _const("ys", rows), _const("half", half[None, None]),
+        *_coordinate_nodes(planned, HEIGHT, width), _const("half", half[None, None]),
         _const("axes_c", np.array([3], dtype=np.int64)), _const("axes_hw", np.array([1, 2], dtype=np.int64)),
         _const("ax1", np.array([1], dtype=np.int64)), _const("bright", np.array(600.0, dtype=f32)),
         _const("eps", np.array(1e-6, dtype=f32)), _const("score", np.array([[SCORE]], dtype=f32)),
@@ -70,12 +98,13 @@ def build_polar_double(foot: bool = False, bad_foot: bool = False,
     if foot or bad_foot:
         outputs.append(helper.make_tensor_value_info("foot", TensorProto.FLOAT,
                                                      ["N", 1, 4 if bad_foot else 2]))
+    dims: list[str | int] = ["N", "H", "W", 3] if planned else ["N", HEIGHT, width, 3]
     graph = helper.make_graph(nodes, "fishloc_polar_double",
-                              [helper.make_tensor_value_info("image", TensorProto.UINT8,
-                                                             ["N", HEIGHT, width, 3])], outputs)
+                              [helper.make_tensor_value_info("image", TensorProto.UINT8, dims)], outputs)
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
     model.ir_version = 8
-    helper.set_model_props(model, METADATA if metadata is None else metadata)
+    props = METADATA if metadata is None else metadata
+    helper.set_model_props(model, {**props, "fishloc.view_planned": "1"} if planned else props)
     return model
 
 

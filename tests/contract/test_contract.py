@@ -3,11 +3,12 @@ through the service's pipeline with a test-double model."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
 import pytest
-from polar_double import BOX_WH, METADATA, SCORE, save_polar_double
+from polar_double import BOX_WH, METADATA, OVERLAP, SCORE, WIDTH, save_polar_double
 
 from contract import (
     ModelError,
@@ -19,6 +20,8 @@ from contract import (
     parse_metadata,
 )
 from fisheye import FisheyeCamera, camera_from_dict, foot_points
+from contract.views import DEFAULT_VIEW
+from service.frame_decode import FrameError
 from service.pipeline import Pipeline, PipelineConfig
 
 CAMERA = {"id": "cam", "altitude_m": 3.0, "image_size": [1024, 1024], "principal_point": [511.5, 511.5],
@@ -103,3 +106,69 @@ def test_polar_pipeline_places_the_person(tmp_path: Path, with_foot: bool, xy_m:
     else:
         np.testing.assert_allclose(detections.foot_px[0], foot_points(box[None], pp)[0])
     np.testing.assert_allclose(detections.position_m[0], camera.pixels_to_floor(detections.foot_px)[0])
+
+
+def test_a_planned_model_needs_a_dynamic_input(tmp_path: Path) -> None:
+    fixed = save_polar_double(tmp_path / "fixed.onnx", metadata={**METADATA, "fishloc.view_planned": "1"})
+    with pytest.raises(ModelError, match="dynamic height and width"):
+        OnnxModel(fixed, SessionThreads(1))
+    with pytest.raises(ModelError, match="view_planned must be 0 or 1"):
+        OnnxModel(save_polar_double(tmp_path / "odd.onnx", metadata={**METADATA, "fishloc.view_planned": "yes"}),
+                  SessionThreads(1))
+
+
+def test_a_planned_model_with_one_band_places_the_person_as_its_strip(tmp_path: Path) -> None:
+    # One band at the trained scale is the fixed strip: the same box, whichever contract it came by.
+    fixed = Pipeline(OnnxModel(save_polar_double(tmp_path / "fixed.onnx"), SessionThreads(1)), PipelineConfig())
+    planned_model = OnnxModel(save_polar_double(tmp_path / "planned.onnx", planned=True), SessionThreads(1))
+    assert planned_model.info.planned
+    one_band = dataclasses.replace(DEFAULT_VIEW, scales=(1.0,))
+    planned = Pipeline(planned_model, PipelineConfig(view=one_band))
+    camera = camera_from_dict(CAMERA)
+    plan = planned.plan(camera)
+    assert plan is not None and plan.canvas_wh == (WIDTH + OVERLAP, 64)
+    data, _ = _person_frame(camera, (1.5, 0.8))
+    np.testing.assert_allclose(planned.detect(data, camera).detections.cxcywh,
+                               fixed.detect(data, camera).detections.cxcywh, atol=1e-3)
+
+
+def test_a_planned_outer_band_maps_its_boxes_to_the_frame(tmp_path: Path) -> None:
+    # Two bands: the inner one reaches a little past the split, the outer one (1.5x) holds the far
+    # person alone; its box comes back on the person's ray, as long as the band's rows say.
+    model = OnnxModel(save_polar_double(tmp_path / "planned.onnx", foot=True, planned=True), SessionThreads(1))
+    view = dataclasses.replace(DEFAULT_VIEW, band_margin=0.3, max_pixels=4_000_000)
+    pipeline = Pipeline(model, PipelineConfig(view=view))
+    camera = camera_from_dict(CAMERA)
+    plan = pipeline.plan(camera)
+    assert plan is not None and len(plan.bands) == 2
+    inner, outer = plan.bands
+    angle = 2 * np.pi / 3 / 2  # the middle of the outer band's first piece
+    radius = (inner.radius_px + outer.radius_px) / 2  # beyond the inner band's reach
+    pp = np.asarray(camera.principal_point)
+    uv = pp + radius * np.array([np.cos(angle), np.sin(angle)])
+    xy_m = camera.pixels_to_floor(uv[None])[0]
+    data, uv = _person_frame(camera, (float(xy_m[0]), float(xy_m[1])))
+    detections = pipeline.detect(data, camera).detections
+    assert len(detections.scores) == 1
+    box = detections.cxcywh[0]
+    offset, ray = box[:2] - pp, (uv - pp) / np.linalg.norm(uv - pp)
+    assert abs(ray[0] * offset[1] - ray[1] * offset[0]) < 1.0
+    rows_per_px = plan.grids[-1].px_per_radius_px
+    assert box[3] == pytest.approx(BOX_WH[1] / rows_per_px, rel=0.01)
+    assert np.dot(offset, ray) == pytest.approx(np.linalg.norm(uv - pp), abs=2.0)
+    np.testing.assert_allclose(detections.foot_px[0], uv - ray * box[3] / 2, atol=2.0)
+
+
+@pytest.mark.parametrize(("camera_change", "max_pixels", "reason"), [
+    ({}, 4096, "budget of 4096 px"),
+    ({"focal_px": [4.0, 4.0]}, 1_000_000, "leaves no view"),
+])
+def test_an_unplannable_camera_is_a_frame_error(tmp_path: Path, camera_change: dict[str, object],
+                                                max_pixels: int, reason: str) -> None:
+    model = OnnxModel(save_polar_double(tmp_path / "planned.onnx", planned=True), SessionThreads(1))
+    pipeline = Pipeline(model, PipelineConfig(view=dataclasses.replace(DEFAULT_VIEW, max_pixels=max_pixels)))
+    camera = camera_from_dict({**CAMERA, **camera_change})
+    data, _ = _person_frame(camera_from_dict(CAMERA), (1.0, 1.0))
+    with pytest.raises(FrameError) as refused:
+        pipeline.detect(data, camera)
+    assert refused.value.code == "view_unplannable" and reason in refused.value.message
