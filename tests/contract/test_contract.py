@@ -19,8 +19,8 @@ from contract import (
     metadata_props,
     parse_metadata,
 )
-from fisheye import FisheyeCamera, camera_from_dict, foot_points
 from contract.views import DEFAULT_VIEW
+from fisheye import FisheyeCamera, camera_from_dict, foot_points
 from service.frame_decode import FrameError
 from service.pipeline import Pipeline, PipelineConfig
 
@@ -113,13 +113,14 @@ def test_a_planned_model_needs_a_dynamic_input(tmp_path: Path) -> None:
     with pytest.raises(ModelError, match="dynamic height and width"):
         OnnxModel(fixed, SessionThreads(1))
     with pytest.raises(ModelError, match="view_planned must be 0 or 1"):
-        OnnxModel(save_polar_double(tmp_path / "odd.onnx", metadata={**METADATA, "fishloc.view_planned": "yes"}),
-                  SessionThreads(1))
+        odd = {**METADATA, "fishloc.view_planned": "yes"}
+        OnnxModel(save_polar_double(tmp_path / "odd.onnx", metadata=odd), SessionThreads(1))
 
 
 def test_a_planned_model_with_one_band_places_the_person_as_its_strip(tmp_path: Path) -> None:
     # One band at the trained scale is the fixed strip: the same box, whichever contract it came by.
-    fixed = Pipeline(OnnxModel(save_polar_double(tmp_path / "fixed.onnx"), SessionThreads(1)), PipelineConfig())
+    fixed_model = OnnxModel(save_polar_double(tmp_path / "fixed.onnx"), SessionThreads(1))
+    fixed = Pipeline(fixed_model, PipelineConfig())
     planned_model = OnnxModel(save_polar_double(tmp_path / "planned.onnx", planned=True), SessionThreads(1))
     assert planned_model.info.planned
     one_band = dataclasses.replace(DEFAULT_VIEW, scales=(1.0,))
@@ -135,7 +136,8 @@ def test_a_planned_model_with_one_band_places_the_person_as_its_strip(tmp_path: 
 def test_a_planned_outer_band_maps_its_boxes_to_the_frame(tmp_path: Path) -> None:
     # Two bands: the inner one reaches a little past the split, the outer one (1.5x) holds the far
     # person alone; its box comes back on the person's ray, as long as the band's rows say.
-    model = OnnxModel(save_polar_double(tmp_path / "planned.onnx", foot=True, planned=True), SessionThreads(1))
+    path = save_polar_double(tmp_path / "planned.onnx", foot=True, planned=True)
+    model = OnnxModel(path, SessionThreads(1))
     view = dataclasses.replace(DEFAULT_VIEW, band_margin=0.3, max_pixels=4_000_000)
     pipeline = Pipeline(model, PipelineConfig(view=view))
     camera = camera_from_dict(CAMERA)
