@@ -7,6 +7,7 @@ that is not a checkpoint, a truncated file, weights that do not fit the stored c
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 from dataclasses import dataclass, field
@@ -131,12 +132,19 @@ def load_model(path: str | Path) -> tuple[nn.Module, Checkpoint]:
     return checkpoint.build(path), checkpoint
 
 
-def save_release(source: str | Path, target: str | Path, info: ModelInfo | None = None) -> Checkpoint:
+def save_release(source: str | Path, target: str | Path, info: ModelInfo | None = None,
+                 graph: dict[str, bool] | None = None) -> Checkpoint:
     """Copy a training checkpoint without its training state (optimizer, schedule, RNG): the file
     to ship and to fine-tune from with `fishloc train --init`, a third of the size. `info`, when
-    given, replaces what the model says about itself (version, data, threshold)."""
+    given, replaces what the model says about itself (version, data, threshold); `graph` sets
+    fields of a polar config that shape only the exported graph (`peaks`, `planned`)."""
     checkpoint = load_checkpoint(source)
-    release = Checkpoint(checkpoint.config, checkpoint.model_state, info or checkpoint.info, {})
+    config = checkpoint.config
+    if graph:
+        if not hasattr(config, "planned"):
+            raise CheckpointError(f"{source}: --peaks and --planned need a polar network")
+        config = dataclasses.replace(config, **graph)  # type: ignore[arg-type]
+    release = Checkpoint(config, checkpoint.model_state, info or checkpoint.info, {})
     save_checkpoint(target, release)
     return release
 
@@ -151,6 +159,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--trained-on", default=None)
     parser.add_argument("--min-score", type=float, default=None, help="the default score threshold")
     parser.add_argument("--nms-iou", type=float, default=None, help="the rotated NMS IoU")
+    parser.add_argument("--peaks", action="store_true", help="its graph takes the top K among peak cells")
+    parser.add_argument("--planned", action="store_true", help="its graph takes planned views (any size)")
     args = parser.parse_args(argv)
     try:
         info = load_checkpoint(args.source).info
@@ -159,7 +169,8 @@ def main(argv: list[str] | None = None) -> int:
                          default_min_score=info.default_min_score if args.min_score is None
                          else args.min_score,
                          nms_iou=info.nms_iou if args.nms_iou is None else args.nms_iou)
-        shipped = save_release(args.source, args.target, info)
+        graph = {name: True for name in ("peaks", "planned") if getattr(args, name)}
+        shipped = save_release(args.source, args.target, info, graph)
     except CheckpointError as error:
         print(f"detector.checkpoint: {error}", file=sys.stderr)
         return 2

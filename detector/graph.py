@@ -53,12 +53,13 @@ def contract_info(checkpoint: Checkpoint) -> ModelInfo:
     return dataclasses.replace(base, nms_iou=info.nms_iou)
 
 
-def contract_module(checkpoint: Checkpoint, source: str = "<memory>", peaks: bool = False) -> nn.Module:
+def contract_module(checkpoint: Checkpoint, source: str = "<memory>") -> nn.Module:
     """`checkpoint`'s network wrapped to the ONNX contract, in eval mode (a polar network's top K
-    taken among its peak cells with `peaks`: `detector.yolox.decode.peak_cells`)."""
+    taken among its peak cells where its config says `peaks`: `detector.yolox.decode.peak_cells`)."""
     network = checkpoint.build(source)
     if isinstance(network, YoloxNano) and isinstance(checkpoint.config, PolarDetectorConfig):
-        return PolarContract(network, checkpoint.config.max_detections, peaks).eval()
+        config = checkpoint.config
+        return PolarContract(network, config.max_detections, config.peaks).eval()
     if isinstance(network, YoloxNano) and isinstance(checkpoint.config, FisheyeDetectorConfig):
         return FisheyeContract(network, checkpoint.config.max_detections).eval()
     if isinstance(network, FishLocNet):

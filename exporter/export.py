@@ -29,6 +29,7 @@ from torch import nn
 from contract import ModelInfo, OnnxModel, SessionThreads, metadata_props
 from detector.checkpoint import Checkpoint, CheckpointError, load_checkpoint
 from detector.graph import contract_info, contract_module
+from detector.yolox.polar import PolarDetectorConfig
 from exporter.parity import ParityReport, check_parity, synthetic_parity_frames
 from exporter.quantize import check_integer_convolutions, quantize_int8
 from fisheye import FisheyeCamera
@@ -50,9 +51,10 @@ class ExportReport:
 
 @dataclass(frozen=True)
 class GraphOptions:
-    """How the graph is built: `planned`, a polar graph of any height and width (multiples of 32)
-    whose view the service plans per camera (`fishloc.view_planned`); `peaks`, its top K taken
-    among peak cells only (`detector.yolox.decode.peak_cells`)."""
+    """How the graph is built beyond what the checkpoint says: `planned`, a polar graph of any
+    height and width (multiples of 32) whose view the service plans per camera
+    (`fishloc.view_planned`); `peaks`, its top K taken among peak cells only
+    (`detector.yolox.decode.peak_cells`). Either turns on what the checkpoint's config leaves off."""
 
     planned: bool = False
     peaks: bool = False
@@ -64,12 +66,16 @@ def contract_model(checkpoint: Checkpoint, input_size: int | None = None, source
     letterbox side or a strip height), and the metadata its export carries."""
     if input_size is not None and input_size % 32 != 0:
         raise ValueError(f"--input-size must be a multiple of 32, got {input_size}")
-    if input_size is not None and input_size != checkpoint.config.input_size:
-        checkpoint = replace(checkpoint, config=replace(checkpoint.config, input_size=input_size))
-    info = contract_info(checkpoint)
-    if (options.planned or options.peaks) and info.polar is None:
-        raise ValueError("--planned and --peaks need a polar network")
-    return contract_module(checkpoint, source, options.peaks), replace(info, planned=options.planned)
+    config = checkpoint.config
+    if input_size is not None and input_size != config.input_size:
+        config = replace(config, input_size=input_size)
+    if options.planned or options.peaks:
+        if not isinstance(config, PolarDetectorConfig):
+            raise ValueError("--planned and --peaks need a polar network")
+        config = replace(config, planned=config.planned or options.planned,
+                         peaks=config.peaks or options.peaks)
+    checkpoint = replace(checkpoint, config=config)
+    return contract_module(checkpoint, source), contract_info(checkpoint)
 
 
 def _torch_to_onnx(model: nn.Module, info: ModelInfo, path: Path, opset: int) -> None:

@@ -47,6 +47,10 @@ class PolarDetectorConfig(DetectorConfigRecord):
     foot_refine: bool = False  # its second stage on the stride-8 features (foot.FootRefiner)
     foot_refine_steps: int = 1  # passes of that stage
     foot_neck: bool = False  # the foot reads its own copy of the neck (foot.FootNeck)
+    # The graph (0.6 on): the top K among peak cells only, and an input of any height and width
+    # whose view the service plans per camera (DESIGN.md's planned views; `fishloc.view_planned`).
+    peaks: bool = False
+    planned: bool = False
 
     def __post_init__(self) -> None:
         if self.input_size % 32 or (self.polar_width + self.polar_overlap) % 32:
@@ -73,7 +77,8 @@ class PolarDetectorConfig(DetectorConfigRecord):
         return ModelInfo(name=self.model_name, version=version, view=VIEW_POLAR, input_size=self.input_size,
                          pad_value=PAD_VALUE, default_min_score=default_min_score, trained_on=trained_on,
                          box_format=BOX_FORMATS[VIEW_POLAR], licence=LICENCE,
-                         polar=PolarSpec(self.polar_width, self.polar_overlap, self.polar_max_theta_deg))
+                         polar=PolarSpec(self.polar_width, self.polar_overlap, self.polar_max_theta_deg),
+                         planned=self.planned)
 
 
 def build_polar_network(config: PolarDetectorConfig) -> YoloxNano:

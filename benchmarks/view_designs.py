@@ -1,0 +1,109 @@
+"""`python -m benchmarks.view_designs`: one model, several view designs, every evaluation set at once.
+
+Each design is a way to build the model's input (the fixed strip, or a planned view with its
+`ViewPlanConfig`); each is scored with `fishloc eval`'s metrics on every set given (the real check
+frames and the renders together: a design that gains on one set and loses on the others is tuned
+to a room), and the input's cost is reported beside it as the planned pixels against the trained
+strip's. The figures of the README's "View planning" table come from this command:
+
+    python -m benchmarks.view_designs --model models/fishloc-default.onnx \\
+        --data lunch3=../shared/real-frames/cepdof_lunch3.json \\
+        --data scenes4=../shared/real-frames/scenes4.json \\
+        --data unseen=data/unseen1024/annotations.json --json view-designs.json
+
+The model must be a planned one (`fishloc export --planned`): the fixed strip is its one-band plan.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from contract import ModelError, ModelRunner, OnnxModel, SessionThreads
+from contract.views import DEFAULT_VIEW, view_plan
+from fisheye.view_plan import ViewPlanConfig
+
+# The designs compared for 0.6.0: the trained strip, and two bands (the rim at 1.5x) with the inner
+# band over the whole disc or reaching 0.6 of a standing adult past the split, or at 0.75x.
+DESIGNS: dict[str, ViewPlanConfig] = {
+    "strip (one band, 1.0x)": dataclasses.replace(DEFAULT_VIEW, scales=(1.0,)),
+    "two bands 1.0x / 1.5x, inner = whole disc": dataclasses.replace(DEFAULT_VIEW, max_pixels=4_000_000),
+    "two bands 1.0x / 1.5x, margin 0.6": dataclasses.replace(DEFAULT_VIEW, max_pixels=4_000_000,
+                                                             band_margin=0.6),
+    "two bands 0.75x / 1.5x, margin 0.6": dataclasses.replace(DEFAULT_VIEW, max_pixels=4_000_000,
+                                                              scales=(0.75, 1.5), band_margin=0.6),
+}
+FIGURES = ("AP50", "precision", "recall", "AP_far", "recall_nadir", "mPE")
+
+
+def evaluate_design(model: OnnxModel, view: ViewPlanConfig, frames: Sequence[Any]) -> dict[str, Any]:
+    """`fishloc eval`'s metrics of `model` on `frames` with views planned by `view`, and the mean
+    cost ratio of the plans (pixels against the trained strip)."""
+    from detector.evaluate import RunnerPredictor, evaluate, frame_camera
+
+    metrics = evaluate(RunnerPredictor(ModelRunner(model, view=view)), frames).metrics
+    costs = [view_plan(model.info, frame_camera(frame), view).cost_ratio for frame in frames]
+    return {**{k: metrics.get(k) for k in FIGURES}, "cost_ratio": sum(costs) / len(costs)}
+
+
+def _cell(value: Any) -> str:
+    return "–" if value is None or value != value else f"{value:.3f}"
+
+
+def markdown_table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
+    """Designs as rows; per set AP50 / precision (and AP_far, recall_nadir, mPE where the set has
+    floor positions), and the cost ratio of the first set's plans."""
+    sets = list(next(iter(results.values())))
+    header = ["design", *[f"{s} AP50 / P" for s in sets], "renders AP_far / recall_nadir / mPE", "cost"]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for design, by_set in results.items():
+        cells = [design, *[f"{_cell(by_set[s]['AP50'])} / {_cell(by_set[s]['precision'])}" for s in sets]]
+        rendered = [s for s in sets if by_set[s].get("mPE") is not None]
+        extra = by_set[rendered[-1]] if rendered else {}
+        cells.append(" / ".join(_cell(extra.get(k)) for k in ("AP_far", "recall_nadir", "mPE")))
+        cells.append(f"{by_set[sets[0]]['cost_ratio']:.2f}x")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.view_designs", description=__doc__)
+    parser.add_argument("--model", required=True, help="a planned ONNX model")
+    parser.add_argument("--data", action="append", required=True, metavar="NAME=ANNOTATIONS",
+                        help="an evaluation set (repeat): name=annotations.json")
+    parser.add_argument("--limit", type=int, default=None, help="the first N frames of each set")
+    parser.add_argument("--threads", type=int, default=2, help="inference threads (default 2)")
+    parser.add_argument("--json", type=Path, default=None, help="where to write every figure")
+    args = parser.parse_args(argv)
+    from detector.data.readers import DatasetFormatError, read_dataset
+
+    try:
+        model = OnnxModel(args.model, SessionThreads(intra_op=args.threads))
+        if not model.info.planned:
+            raise ModelError(f"{args.model} is not a planned model (fishloc export --planned)")
+        sets = {}
+        for item in args.data:
+            name, _, path = item.partition("=")
+            if not path:
+                raise ValueError(f"--data wants NAME=ANNOTATIONS, got {item!r}")
+            sets[name] = read_dataset(path)[:args.limit]
+    except (ModelError, DatasetFormatError, ValueError) as error:
+        print(f"view_designs: {error}", file=sys.stderr)
+        return 2
+    results: dict[str, dict[str, dict[str, Any]]] = {}
+    for design, view in DESIGNS.items():
+        results[design] = {name: evaluate_design(model, view, frames) for name, frames in sets.items()}
+        print(json.dumps({design: results[design]}), file=sys.stderr, flush=True)
+    print(markdown_table(results))
+    if args.json is not None:
+        args.json.write_text(json.dumps(results, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
