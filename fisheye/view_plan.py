@@ -13,9 +13,10 @@ scale has 1.5x the columns per turn): pieces of every band have the same width, 
 one input image (the canvas), each below the previous one with `gap_rows` rows of padding between
 them. A band's strip rows map linearly to its radii (`fisheye.polar.PolarGrid` with an inner radius).
 
-The outer band starts where the inner band's people end: the inner band reaches up to the head of a
-person whose feet stand at the split, so everyone is whole in at least one band; the detector's NMS
-in the frame merges whom both bands see.
+Each band reports the people centred in its own radii (the inner band those inside the split, the
+outer band the rest) and shows `band_margin` standing adults' lengths past them, so a person
+centred near the split is whole in the band that reports them; the detector's NMS in the frame
+merges the copies of a person in the overlap columns of a band's pieces.
 """
 
 from __future__ import annotations
@@ -66,8 +67,9 @@ class ViewPlanConfig:
     scales: tuple[float, ...] = (1.0, 1.5)
     floor_theta_deg: float = 80.0  # people are planned for up to this angle from the axis (17 m at 3 m)
     # Each band shows this many standing adults' lengths (at the split) past the radii it reports,
-    # so a person centred there is whole in it; None: the inner band shows the whole disc.
-    band_margin: float | None = None
+    # so a person centred there is whole in it; None: the inner band shows the whole disc. 0.6 was
+    # chosen over the whole disc on the real and rendered sets together (README, "View planning").
+    band_margin: float | None = 0.6
     max_pixels: int = 1_000_000  # about 0.5.0's strip (745 472 px): its latency
     gap_rows: int = STRIDE
 
