@@ -11,6 +11,7 @@ import pytest
 from service_live_server import LiveServer
 
 from fisheye import FisheyeCamera, camera_to_dict
+from models import DEFAULT_MODEL_PATH
 from service.core.config import Settings
 
 TOKEN = "s3cret-token-for-tests"
@@ -99,3 +100,31 @@ def test_cameras_flag_seeds_the_registry(settings_for: Callable[..., Settings], 
     with LiveServer(settings_for(cameras=folder, demo_camera=False)) as live:
         ids = [c["id"] for c in httpx.get(f"{live.url}/v1/cameras").json()["cameras"]]
         assert ids == ["entrance"]
+
+
+def test_a_planned_model_reports_each_camera_view(settings_for: Callable[..., Settings]) -> None:
+    # The shipped model plans its views: within the default budget the demo camera keeps the
+    # trained strip; a larger budget gives its rim a band of its own, at 1.5x.
+    with LiveServer(settings_for(model=DEFAULT_MODEL_PATH)) as live:
+        view = httpx.get(f"{live.url}/v1/cameras/demo").json()["view"]
+        assert view["input_wh"] == [1792, 416] and view["cost_ratio"] == pytest.approx(1.0)
+        assert [band["scale"] for band in view["bands"]] == [1.0]
+        assert any("budget" in note for note in view["notes"])
+        assert "view" not in httpx.get(f"{live.url}/v1/cameras").json()["cameras"][0]
+    with LiveServer(settings_for(model=DEFAULT_MODEL_PATH, max_view_pixels=4_000_000)) as live:
+        view = httpx.get(f"{live.url}/v1/cameras/demo").json()["view"]
+        assert [band["scale"] for band in view["bands"]] == [1.0, 1.5]
+        assert view["pixels"] == view["input_wh"][0] * view["input_wh"][1] <= 4_000_000
+        assert view["smallest_person"]["along_px"] > 0
+
+
+def test_a_camera_whose_view_cannot_be_planned_is_refused(settings_for: Callable[..., Settings]) -> None:
+    with LiveServer(settings_for(model=DEFAULT_MODEL_PATH)) as live:
+        url = f"{live.url}/v1/cameras/pinhole"
+        response = httpx.put(url, json={**lobby(), "focal_px": [4.0, 4.0]})  # an image circle of 6 px
+        assert response.status_code == 422 and response.json()["error"]["code"] == "view_unplannable"
+        assert "no view" in response.json()["error"]["message"]
+        assert httpx.get(url).status_code == 404  # nothing was saved
+    with LiveServer(settings_for(model=DEFAULT_MODEL_PATH, max_view_pixels=4096)) as live:
+        response = httpx.get(f"{live.url}/v1/cameras/demo")
+        assert response.status_code == 422 and "budget of 4096 px" in response.json()["error"]["message"]
