@@ -232,6 +232,80 @@ def _layout(camera: FisheyeCamera, bands: list[ViewBand], reference: ViewReferen
     return tuple(grids), tuple(offsets), (canvas_w, canvas_h)
 
 
+def _band(start_px: float, end_px: float, scale: float, rows_per_px: float,
+          owned_px: tuple[float, float] = (0.0, math.inf)) -> ViewBand:
+    """The ring [`start_px`, `end_px`] at `scale` times the trained strip (rows rounded up to 16)."""
+    return ViewBand(start_px, end_px, scale, _ceil_to(scale * rows_per_px * (end_px - start_px), STRIDE // 2),
+                    1, owned_px)
+
+
+def _bands(camera: FisheyeCamera, radii: FloatArray, need: FloatArray, seen: NDArray[np.bool_], top: float,
+           rows_per_px: float, config: ViewPlanConfig) -> list[ViewBand]:
+    """One band at the smallest scale, or two when people at the rim need more than it: the outer
+    band at the smallest scale that brings them to the targets (or the largest)."""
+    small = config.scales[0]
+    # The rim part where people fall below the targets at the smallest scale; below the lens a
+    # person seen from above is short along the ray but large across, and stays in the inner band.
+    fits = np.nonzero(seen & (need <= small))[0]
+    last_fit = fits[-1] if len(fits) else -1
+    beyond = np.nonzero(seen & (need > small) & (np.arange(len(radii)) > last_fit))[0]
+    if len(beyond) == 0 or len(config.scales) == 1:
+        return [_band(0.0, top, small, rows_per_px)]
+    split = float(radii[beyond[0]])
+    outer_scale = next((s for s in config.scales if s >= float(np.max(need[beyond]))), config.scales[-1])
+    # Each band reports the people centred in its own radii and shows those centred near the split
+    # whole: `band_margin` standing adults' lengths past it (None: the inner band the whole disc).
+    length = _person_length_px(camera, split, config)
+    margin = length if config.band_margin is None else config.band_margin * length
+    reach = top if config.band_margin is None else min(top, split + margin)
+    return [_band(0.0, reach, small, rows_per_px, (0.0, split)),
+            _band(max(0.0, split - margin), top, outer_scale, rows_per_px, (split, math.inf))]
+
+
+def _within_budget(camera: FisheyeCamera, bands: list[ViewBand], top: float, rows_per_px: float,
+                   reference: ViewReference, config: ViewPlanConfig
+                   ) -> tuple[list[ViewBand], tuple[tuple[PolarGrid, ...], tuple[int, ...], tuple[int, int]],
+                              list[str]]:
+    """The bands (cut into pieces) and their layout within `config.max_pixels`: the outer band
+    steps down the scales first (to one band at the smallest), then the one band shrinks; notes say
+    where the budget bound. ViewPlanError when under a quarter of the trained scale or 64 rows
+    would be left."""
+    notes: list[str] = []
+    bands = _with_pieces(bands)
+    layout = _layout(camera, bands, reference, config)
+    while _pixels(layout) > config.max_pixels and len(bands) == 2:
+        lower = max(s for s in config.scales if s < bands[1].scale)
+        notes.append(f"budget {config.max_pixels} px binds: the outer band at scale {lower:g}, "
+                     f"not {bands[1].scale:g}")
+        outer = bands[1]
+        if lower == bands[0].scale:  # one band again
+            bands = [_band(0.0, top, lower, rows_per_px)]
+        else:
+            bands = [bands[0], _band(outer.inner_radius_px, outer.radius_px, lower, rows_per_px,
+                                     outer.owned_px)]
+        bands = _with_pieces(bands)
+        layout = _layout(camera, bands, reference, config)
+    if _pixels(layout) <= config.max_pixels:
+        return bands, layout, notes
+    scale = bands[0].scale * math.sqrt(config.max_pixels / _pixels(layout))
+    while True:  # rounding to the stride may leave it a little over: shrink until it fits
+        if scale < 0.25 or scale * rows_per_px * top < 2 * STRIDE:  # fewer rows show nobody
+            raise ViewPlanError(f"a budget of {config.max_pixels} px leaves under a quarter of the trained "
+                                f"scale or under {2 * STRIDE} rows for this camera (it needs "
+                                f"{_pixels(_layout(camera, _with_pieces(bands), reference, config))} px "
+                                f"at scale {bands[0].scale:g})")
+        shrunk = [_band(0.0, top, scale, rows_per_px)]
+        layout = _layout(camera, shrunk, reference, config)
+        if _pixels(layout) <= config.max_pixels:
+            notes.append(f"budget {config.max_pixels} px binds: one band at scale {scale:.2f}")
+            return shrunk, layout, notes
+        scale *= 0.97
+
+
+def _pixels(layout: tuple[object, object, tuple[int, int]]) -> int:
+    return layout[2][0] * layout[2][1]
+
+
 def plan_view(camera: FisheyeCamera, reference: ViewReference | None = None,
               config: ViewPlanConfig | None = None) -> ViewPlan:
     """The view of `camera`'s frames (the camera at the frames' size) for a model trained on
@@ -255,60 +329,8 @@ def plan_view(camera: FisheyeCamera, reference: ViewReference | None = None,
     if not seen.any():
         raise ViewPlanError("no floor point of the frame lies in view of the lens")
     need = np.where(seen, _needed_scale(along, across, rows_per_px, reference, config), 0.0)
-    notes: list[str] = []
-    small, large = config.scales[0], config.scales[-1]
-    inner_scale = small
-    # The rim part where people fall below the targets at the trained scale; below the lens a
-    # person seen from above is short along the ray but large across, and stays in the inner band.
-    fits = np.nonzero(seen & (need <= small))[0]
-    beyond = np.nonzero(seen & (need > small) & (np.arange(len(radii)) > (fits[-1] if len(fits) else -1)))[0]
-    bands: list[ViewBand]
-    if len(beyond) == 0 or len(config.scales) == 1:
-        bands = [ViewBand(0.0, top, small, _ceil_to(small * rows_per_px * top, STRIDE // 2), 1)]
-    else:
-        split = float(radii[beyond[0]])
-        outer_scale = next((s for s in config.scales if s >= float(np.max(need[beyond]))), large)
-        # Each band reports the people centred in its own radii and shows everyone who may be:
-        # the inner band the whole disc (people near the lens lie long along the ray, reclining
-        # or seated ones most), the outer band from a person's length inside the split.
-        length = _person_length_px(camera, split, config)
-        margin = length if config.band_margin is None else config.band_margin * length
-        start = max(0.0, split - margin)
-        reach = top if config.band_margin is None else min(top, split + margin)
-        inner = ViewBand(0.0, reach, inner_scale, _ceil_to(inner_scale * rows_per_px * reach, STRIDE // 2), 1,
-                         (0.0, split))
-        outer = ViewBand(start, top, outer_scale,
-                         _ceil_to(outer_scale * rows_per_px * (top - start), STRIDE // 2), 1,
-                         (split, math.inf))
-        bands = [inner, outer]
-    bands = _with_pieces(bands)
-    grids, offsets, canvas = _layout(camera, bands, reference, config)
-    while canvas[0] * canvas[1] > config.max_pixels and len(bands) == 2 and bands[1].scale > bands[0].scale:
-        lower = max(s for s in config.scales if s < bands[1].scale)
-        notes.append(f"budget {config.max_pixels} px binds: the outer band at scale {lower:g}, "
-                     f"not {bands[1].scale:g}")
-        outer = bands[1]
-        bands = _with_pieces([bands[0], ViewBand(outer.inner_radius_px, outer.radius_px, lower,
-                                                 _ceil_to(lower * rows_per_px * (outer.radius_px
-                                                                                - outer.inner_radius_px),
-                                                          STRIDE // 2), 1, outer.owned_px)])
-        if bands[1].scale == bands[0].scale:  # one band again
-            bands = _with_pieces([ViewBand(0.0, top, bands[0].scale, _ceil_to(
-                bands[0].scale * rows_per_px * top, STRIDE // 2), 1)])
-        grids, offsets, canvas = _layout(camera, bands, reference, config)
-    if canvas[0] * canvas[1] > config.max_pixels:
-        scale = bands[0].scale * math.sqrt(config.max_pixels / (canvas[0] * canvas[1]))
-        if scale < 0.25 or scale * rows_per_px * top < 2 * STRIDE:  # fewer rows show nobody
-            raise ViewPlanError(f"a budget of {config.max_pixels} px leaves under a quarter of the trained "
-                                f"scale or under {2 * STRIDE} rows for this camera (it needs "
-                                f"{canvas[0] * canvas[1]} px at scale {bands[0].scale:g})")
-        while True:  # rounding to the stride may leave it a little over: shrink until it fits
-            bands = [ViewBand(0.0, top, scale, _ceil_to(scale * rows_per_px * top, STRIDE // 2), 1)]
-            grids, offsets, canvas = _layout(camera, bands, reference, config)
-            if canvas[0] * canvas[1] <= config.max_pixels or scale < 0.25:
-                break
-            scale *= 0.97
-        notes.append(f"budget {config.max_pixels} px binds: one band at scale {scale:.2f}")
+    wanted = _bands(camera, radii, need, seen, top, rows_per_px, config)
+    bands, (grids, offsets, canvas), notes = _within_budget(camera, wanted, top, rows_per_px, reference, config)
     smallest = _smallest(bands, radii, (along, across, distance), rows_per_px, reference, config, seen)
     if smallest.along_px < config.target_along_px or smallest.across_px < config.target_across_px:
         notes.append(f"the smallest person ({smallest.along_px:.0f} x {smallest.across_px:.0f} px at "
