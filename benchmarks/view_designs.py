@@ -32,7 +32,8 @@ from fisheye.view_plan import ViewPlanConfig
 # band over the whole disc or reaching 0.6 of a standing adult past the split, or at 0.75x.
 DESIGNS: dict[str, ViewPlanConfig] = {
     "strip (one band, 1.0x)": dataclasses.replace(DEFAULT_VIEW, scales=(1.0,)),
-    "two bands 1.0x / 1.5x, inner = whole disc": dataclasses.replace(DEFAULT_VIEW, max_pixels=4_000_000),
+    "two bands 1.0x / 1.5x, inner = whole disc": dataclasses.replace(DEFAULT_VIEW, max_pixels=4_000_000,
+                                                                     band_margin=None),
     "two bands 1.0x / 1.5x, margin 0.6": dataclasses.replace(DEFAULT_VIEW, max_pixels=4_000_000,
                                                              band_margin=0.6),
     "two bands 0.75x / 1.5x, margin 0.6": dataclasses.replace(DEFAULT_VIEW, max_pixels=4_000_000,

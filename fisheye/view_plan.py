@@ -330,7 +330,8 @@ def plan_view(camera: FisheyeCamera, reference: ViewReference | None = None,
         raise ViewPlanError("no floor point of the frame lies in view of the lens")
     need = np.where(seen, _needed_scale(along, across, rows_per_px, reference, config), 0.0)
     wanted = _bands(camera, radii, need, seen, top, rows_per_px, config)
-    bands, (grids, offsets, canvas), notes = _within_budget(camera, wanted, top, rows_per_px, reference, config)
+    bands, layout, notes = _within_budget(camera, wanted, top, rows_per_px, reference, config)
+    grids, offsets, canvas = layout
     smallest = _smallest(bands, radii, (along, across, distance), rows_per_px, reference, config, seen)
     if smallest.along_px < config.target_along_px or smallest.across_px < config.target_across_px:
         notes.append(f"the smallest person ({smallest.along_px:.0f} x {smallest.across_px:.0f} px at "
