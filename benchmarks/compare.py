@@ -18,6 +18,7 @@ alike. Times are this machine's: compare rows of one run.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -33,10 +34,12 @@ from benchmarks.frames import FrameSet, load_frames
 from benchmarks.machine import machine_info
 from benchmarks.stats import summarize
 from contract import ModelRunner, OnnxModel, SessionThreads, min_decoded_side, prepare_input
+from contract.views import DEFAULT_VIEW
 from detector.baselines import LetterboxPredictor, RotatedCropsPredictor
 from detector.data.readers import read_dataset
 from detector.evaluate import Predictor, RunnerPredictor, evaluate, json_safe, load_predictor
 from fisheye import FisheyeCamera, load_camera
+from fisheye.view_plan import ViewPlanConfig
 from models import DEMO_CAMERA_PATH
 from service.frame_decode import decode_frame, read_header
 from service.pipeline import Pipeline, PipelineConfig
@@ -65,24 +68,24 @@ def _timed(call: Callable[[], object]) -> float:
     return (time.perf_counter() - start) * 1e3
 
 
-def _onnx_entry(name: str, path: str, threads: int) -> Entry:
+def _onnx_entry(name: str, path: str, threads: int, view: ViewPlanConfig = DEFAULT_VIEW) -> Entry:
     model = OnnxModel(path, SessionThreads(intra_op=threads))
-    pipeline = Pipeline(model, PipelineConfig())
+    pipeline = Pipeline(model, PipelineConfig(view=view))
     pipeline.warm_up()
     inputs: dict[bytes, np.ndarray] = {}
 
     def model_input(data: bytes, camera: FisheyeCamera) -> np.ndarray:
         if data not in inputs:
             frame_camera = camera.scaled_to(read_header(data).size_wh)
-            frame = decode_frame(data, min_decoded_side(model.info, frame_camera), 40_000_000)
-            inputs[data] = prepare_input(model.info, frame.rgb, frame_camera)[0]
+            frame = decode_frame(data, min_decoded_side(model.info, frame_camera, view), 40_000_000)
+            inputs[data] = prepare_input(model.info, frame.rgb, frame_camera, view)[0]
         return inputs[data]
 
     def inference_ms(data: bytes, camera: FisheyeCamera) -> float:
         image = model_input(data, camera)  # made outside the timed call
         return _timed(lambda: model.run(image))
 
-    return Entry(name, RunnerPredictor(ModelRunner(model)),
+    return Entry(name, RunnerPredictor(ModelRunner(model, view=view)),
                  lambda data, camera: _timed(lambda: pipeline.detect(data, camera)), inference_ms)
 
 
@@ -101,12 +104,15 @@ def _predictor_entry(name: str, predictor: Predictor) -> Entry:
 
 
 def build_entry(name: str, spec: str, threads: int) -> Entry:
-    """`spec` is an ONNX file, a checkpoint, or `KIND:ONNX` for a zero-shot baseline."""
+    """`spec` is an ONNX file (`FILE@PIXELS`: a planned model's views within PIXELS, as `fishloc
+    serve --max-view-pixels`), a checkpoint, or `KIND:ONNX` for a zero-shot baseline."""
     kind, _, path = spec.partition(":")
     if kind in BASELINES and path:
         return _predictor_entry(name, BASELINES[kind](path, threads))
-    if Path(spec).suffix.lower() == ".onnx":
-        return _onnx_entry(name, spec, threads)
+    file, _, pixels = spec.partition("@")
+    if Path(file).suffix.lower() == ".onnx":
+        view = dataclasses.replace(DEFAULT_VIEW, max_pixels=int(pixels)) if pixels else DEFAULT_VIEW
+        return _onnx_entry(name, file, threads, view)
     return _predictor_entry(name, load_predictor(spec, threads=threads))
 
 
