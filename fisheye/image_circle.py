@@ -337,11 +337,17 @@ def fit_image_circle(image: NDArray[np.uint8], rays: int = _RAYS) -> ImageCircle
     sx, sy = width / grey.shape[1], height / grey.shape[0]
     levels = _levels(grey)
     centre = _bright_mask_centre(grey, levels.threshold)
-    points, cut_rays = np.zeros((0, 2)), 0
+    points = np.zeros((0, 2))
     circle: tuple[float, float, float] | None = None
     inliers = np.zeros(0, dtype=bool)
     for _ in range(2):
         points, cut_rays = rim_points(grey, centre, levels.threshold, rays)
+        if cut_rays >= 0.9 * rays:
+            raise CalibrationError(
+                f"no visible rim: {cut_rays} of {rays} rays from the frame's middle stay inside the "
+                "image circle up to the frame's edge (the circle covers the frame), so its centre and "
+                "radius cannot be measured; give the camera's principal point and focal, or use the "
+                "assumed camera", code="no_visible_rim")
         if len(points) < _MIN_RIM_POINTS:
             break
         tolerance = max(1.5, 0.005 * max(grey.shape))
@@ -352,24 +358,19 @@ def fit_image_circle(image: NDArray[np.uint8], rays: int = _RAYS) -> ImageCircle
             break
         centre = (circle[0], circle[1])
     if circle is None or inliers.sum() < _MIN_RIM_POINTS:
-        found = len(points)
-        if cut_rays >= 0.9 * rays:
-            raise CalibrationError(
-                f"no visible rim: {cut_rays} of {rays} rays from the frame's middle stay inside the "
-                "image circle up to the frame's edge (the circle covers the frame), so its centre and "
-                "radius cannot be measured; give the camera's principal point and focal, or use the "
-                "assumed camera", code="no_visible_rim")
         raise CalibrationError(
-            f"no image circle: {found} rim points found along {rays} rays ({int(inliers.sum())} on one "
-            f"circle), {_MIN_RIM_POINTS} are needed", code="no_circle")
-    return _checked(grey, circle, points, inliers, levels, (width, height), (sx, sy), rays)
+            f"no image circle: {len(points)} rim points found along {rays} rays ({int(inliers.sum())} "
+            f"on one circle), {_MIN_RIM_POINTS} are needed", code="no_circle")
+    return _checked(grey, circle, points, inliers, levels, (width, height), (sx, sy), (rays, cut_rays))
 
 
 def _checked(grey: NDArray[np.float32], circle: tuple[float, float, float], points: FloatArray,
              inliers: NDArray[np.bool_], levels: _Levels, image_wh: tuple[int, int],
-             scale_xy: tuple[float, float], rays: int) -> ImageCircle:
-    """The fitted circle in frame px after the checks that refuse what is not an image circle."""
+             scale_xy: tuple[float, float], ray_counts: tuple[int, int]) -> ImageCircle:
+    """The fitted circle in frame px after the checks that refuse what is not an image circle;
+    `ray_counts` are the rays cast and those that ended bright at the frame's edge."""
     width, height = image_wh
+    rays, cut_rays = ray_counts
     sx, sy = scale_xy
     span = _arc_span_deg(points[inliers], (circle[0], circle[1]))
     if span < _MIN_RIM_ARC_DEG:
@@ -382,6 +383,12 @@ def _checked(grey: NDArray[np.float32], circle: tuple[float, float, float], poin
             f"no image circle: only {fraction:.0%} of the {len(points)} rim points lie on one circle",
             code="no_circle")
     bright = _bright_outside(grey, circle, levels.threshold, margin=max(3.0, 0.01 * circle[2]))
+    if bright is not None and bright > _MAX_BRIGHT_OUTSIDE and cut_rays >= 0.5 * rays:
+        raise CalibrationError(
+            f"no visible rim: {cut_rays} of {rays} rays stay bright up to the frame's edge and the "
+            f"frame beyond the best circle is bright too ({bright:.0%}): the image circle seems to "
+            "cover the frame; give the camera's principal point and focal, or use the assumed camera",
+            code="no_visible_rim")
     if bright is not None and bright > _MAX_BRIGHT_OUTSIDE:
         raise CalibrationError(
             f"no image circle: {bright:.0%} of the frame outside the fitted circle is bright; the "
