@@ -228,7 +228,7 @@ def rim_points(grey: NDArray[np.float32], centre: tuple[float, float], threshold
     height, width = grey.shape
     angles = np.arange(rays) * (2 * math.pi / rays)
     ends = _ray_ends(centre, angles, (width, height))
-    length = int(math.ceil(ends.max())) + 1
+    length = math.ceil(ends.max()) + 1
     steps = np.arange(length, dtype=np.float64)  # one sample per px from the centre outward
     map_u = (centre[0] + np.cos(angles)[:, None] * steps).astype(np.float32)
     map_v = (centre[1] + np.sin(angles)[:, None] * steps).astype(np.float32)
@@ -236,7 +236,7 @@ def rim_points(grey: NDArray[np.float32], centre: tuple[float, float], threshold
     run = max(3, round(0.01 * max(width, height)))
     points, cut = [], 0
     for index in range(rays):
-        last = int(math.floor(ends[index]))
+        last = math.floor(ends[index])
         if last < 2 * run:
             continue
         profile = profiles[index, :last + 1]
