@@ -36,7 +36,7 @@ from fisheye.camera_file import ASSUMED_ALTITUDE_M, CalibrationError, camera_fro
 FloatArray = NDArray[np.float64]
 
 MIN_SIDE_PX = 32
-_WORK_SIDE_PX = 1024  # the fit runs at most this long a side; the rim is placed to a fraction of a px
+WORK_SIDE_PX = 1024  # the fit runs at most this long a side; the rim is placed to a fraction of a px
 _RAYS = 720
 _MIN_CONTRAST = 20.0  # grey levels between the border and the scene
 _MIN_RIM_POINTS = 24
@@ -226,13 +226,14 @@ def rim_points(grey: NDArray[np.float32], centre: tuple[float, float], threshold
     """(H, W) grey levels -> (N, 2) rim points (px of `grey`) along `rays` rays from `centre`, and
     how many rays end bright at the frame's edge (inside the circle: the frame cuts it there)."""
     height, width = grey.shape
-    angles = np.arange(rays) * (2 * math.pi / rays)
+    angles = np.arange(rays, dtype=np.float64) * (2 * math.pi / rays)
     ends = _ray_ends(centre, angles, (width, height))
     length = math.ceil(ends.max()) + 1
     steps = np.arange(length, dtype=np.float64)  # one sample per px from the centre outward
     map_u = (centre[0] + np.cos(angles)[:, None] * steps).astype(np.float32)
     map_v = (centre[1] + np.sin(angles)[:, None] * steps).astype(np.float32)
-    profiles = cv2.remap(grey, map_u, map_v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    profiles = np.asarray(cv2.remap(grey, map_u, map_v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE),
+                          dtype=np.float32)
     run = max(3, round(0.01 * max(width, height)))
     points, cut = [], 0
     for index in range(rays):
@@ -315,8 +316,11 @@ def _bright_outside(grey: NDArray[np.float32], circle: tuple[float, float, float
     return float((grey[outside] >= threshold).mean())
 
 
-def fit_image_circle(image: NDArray[np.uint8], rays: int = _RAYS) -> ImageCircle:
-    """(H, W) or (H, W, 3) uint8 frame -> its fitted image circle in frame px.
+def fit_image_circle(image: NDArray[np.uint8], frame_wh: tuple[int, int] | None = None,
+                     rays: int = _RAYS) -> ImageCircle:
+    """(H, W) or (H, W, 3) uint8 frame -> its fitted image circle in frame px. `frame_wh` is the
+    size of the frame when `image` is a reduced copy of it (same aspect ratio; e.g. a JPEG decoded
+    at 1/2 scale): the circle comes back in the frame's px.
 
     CalibrationError codes: `frame_too_small`, `no_circle` (no bright disk on a dark border, or
     what was found is not one), `no_visible_rim` (the circle covers the frame: no rim shows, so it
@@ -325,16 +329,17 @@ def fit_image_circle(image: NDArray[np.uint8], rays: int = _RAYS) -> ImageCircle
     if image.ndim not in (2, 3) or image.dtype != np.uint8:
         raise ValueError(f"image must be (H, W) or (H, W, C) uint8, got {image.shape} {image.dtype}")
     height, width = image.shape[:2]
-    if min(width, height) < MIN_SIDE_PX:
-        raise CalibrationError(f"the frame is {width}x{height}; fitting an image circle needs at least "
+    frame_w, frame_h = (width, height) if frame_wh is None else frame_wh
+    if min(width, height, frame_w, frame_h) < MIN_SIDE_PX:
+        raise CalibrationError(f"the frame is {frame_w}x{frame_h}; fitting an image circle needs at least "
                                f"{MIN_SIDE_PX} px a side", code="frame_too_small")
-    scale = min(1.0, _WORK_SIDE_PX / max(width, height))
+    scale = min(1.0, WORK_SIDE_PX / max(width, height))
     grey = grey_levels(image)
     if scale < 1.0:
         size = (max(1, round(width * scale)), max(1, round(height * scale)))
         grey = np.asarray(cv2.resize(grey, size, interpolation=cv2.INTER_AREA), dtype=np.float32)
     # Work px -> frame px: centres of pixels at integers on both (as cv2.resize maps them).
-    sx, sy = width / grey.shape[1], height / grey.shape[0]
+    sx, sy = frame_w / grey.shape[1], frame_h / grey.shape[0]
     levels = _levels(grey)
     centre = _bright_mask_centre(grey, levels.threshold)
     points = np.zeros((0, 2))
@@ -361,7 +366,7 @@ def fit_image_circle(image: NDArray[np.uint8], rays: int = _RAYS) -> ImageCircle
         raise CalibrationError(
             f"no image circle: {len(points)} rim points found along {rays} rays ({int(inliers.sum())} "
             f"on one circle), {_MIN_RIM_POINTS} are needed", code="no_circle")
-    return _checked(grey, circle, points, inliers, levels, (width, height), (sx, sy), (rays, cut_rays))
+    return _checked(grey, circle, points, inliers, levels, (frame_w, frame_h), (sx, sy), (rays, cut_rays))
 
 
 def _checked(grey: NDArray[np.float32], circle: tuple[float, float, float], points: FloatArray,
@@ -434,3 +439,12 @@ def camera_from_circle(circle: ImageCircle, camera_id: str = "camera",
         "kb": [1.0],
         "max_theta_deg": DEFAULT_MAX_THETA_DEG,
     })
+
+
+def starting_camera_notes(circle: ImageCircle, camera: FisheyeCamera) -> tuple[FitNote, ...]:
+    """The circle's notes and one on what the starting camera from it is (and is not)."""
+    return (*circle.notes, FitNote(
+        "starting_camera",
+        f"starting camera: an ideal equidistant 180° lens (kb [1], focal {camera.focal_px[0]:.1f} px = "
+        f"R / (π/2)) {camera.altitude_m:g} m up; floor positions are estimates until the altitude is "
+        "measured and the lens fitted from ruler marks"))
