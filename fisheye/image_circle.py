@@ -31,7 +31,13 @@ from numpy.typing import NDArray
 
 from fisheye.calibration import FitNote
 from fisheye.camera import DEFAULT_MAX_THETA_DEG, FisheyeCamera
-from fisheye.camera_file import ASSUMED_ALTITUDE_M, CalibrationError, camera_from_dict
+from fisheye.camera_file import (
+    ASSUMED_ALTITUDE_M,
+    ASSUMED_CAMERA_ID,
+    CalibrationError,
+    assumed_camera,
+    camera_from_dict,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -448,3 +454,24 @@ def starting_camera_notes(circle: ImageCircle, camera: FisheyeCamera) -> tuple[F
         f"starting camera: an ideal equidistant 180° lens (kb [1], focal {camera.focal_px[0]:.1f} px = "
         f"R / (π/2)) {camera.altitude_m:g} m up; floor positions are estimates until the altitude is "
         "measured and the lens fitted from ruler marks"))
+
+
+def camera_of_uncalibrated_frame(image: NDArray[np.uint8], frame_wh: tuple[int, int] | None = None,
+                                 camera_id: str = ASSUMED_CAMERA_ID) -> tuple[FisheyeCamera, FitNote]:
+    """The camera assumed for a frame nobody calibrated, from the frame itself: the starting camera
+    of its image circle (also one wider than the frame), or, where no circle can be measured, the
+    camera whose circle fills the frame's shorter side (`assumed_camera`); the note says which and
+    why."""
+    height, width = image.shape[:2]
+    wh = (width, height) if frame_wh is None else frame_wh
+    try:
+        circle = fit_image_circle(image, wh)
+    except CalibrationError as error:
+        fallback = assumed_camera(*wh).model_copy(update={"id": camera_id})
+        return fallback, FitNote("assumed_short_side", f"no image circle ({error}); assumed the circle "
+                                                       "that fills the frame's shorter side", "warning")
+    camera = camera_from_circle(circle, camera_id)
+    return camera, FitNote("assumed_image_circle", f"assumed the camera of the frame's image circle: "
+                                                   f"centre ({circle.center_px[0]:.1f}, "
+                                                   f"{circle.center_px[1]:.1f}) px, radius "
+                                                   f"{circle.radius_px:.1f} px")

@@ -10,6 +10,7 @@ they are there. Screenshots go to artifacts/ (CI keeps them).
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -411,14 +412,17 @@ def test_fit_image_circle_draws_the_routes_circle_and_starts_the_camera_from_it(
     open_calibrate(driver, server.url, "hall-9")
     upload_frame(driver, path)
     driver.find_element(By.ID, "cal-circle").click()
-    state = wait_for(lambda: (s := driver.execute_script(CIRCLE_STATE_JS))["circles"] == 1 and s or None,
-                     "the image circle")
+    def fitted() -> dict[str, Any] | None:
+        state: dict[str, Any] = driver.execute_script(CIRCLE_STATE_JS)
+        return state if state["circles"] == 1 else None
+
+    state = wait_for(fitted, "the image circle")
     assert state["answer"] == answer
     (u0, v0), radius = answer["circle"]["center_px"], answer["circle"]["radius_px"]
     drawn = state["drawn"]
     assert (drawn["u"], drawn["v"], drawn["r"]) == (u0, v0, radius)
     assert (drawn["cx"], drawn["cy"], drawn["rim_r"]) == (u0, v0, radius)
-    numbers = [float(n) for n in drawn["centre"].replace("M", " ").replace("H", " ").replace("V", " ").split()]
+    numbers = [float(n) for n in re.split(r"[MHV ]+", drawn["centre"]) if n]
     assert numbers[1] == pytest.approx(v0) and numbers[3] == pytest.approx(u0)  # the cross is on the centre
     assert state["start"] == answer["camera"] and state["altitude"] == "3"
     assert state["rings"] > 0  # the starting lens is drawn
