@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import sys
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from reliability_samples import Samples, jpeg_claiming, png_claiming, png_zero_bomb
@@ -242,25 +242,16 @@ CAMERA_CASES: list[HttpCase] = [
 
 CIRCLE = "/v1/calibrations/image-circle"
 
-# POST /v1/calibrations/image-circle: frames that show no circle, and the bodies detect refuses.
+# POST /v1/calibrations/image-circle reads its body as detect does: the same refusals, and its own.
+_CIRCLE_LIKE_DETECT = ("random_bytes", "jpeg_truncated", "png_bomb_header", "body_over_limit",
+                       "content_type_text")
 CIRCLE_CASES: list[HttpCase] = [
+    *(replace(case, name=f"circle_{case.name}", area="image circle", path=CIRCLE)
+      for case in FRAME_CASES if case.name in _CIRCLE_LIKE_DETECT),
     HttpCase("circle_black_frame", "image circle", "all-black 640x480 frame", "POST", CIRCLE,
              lambda s: s.black_jpeg(640, 480), Expect(422, "no_circle", "not brighter"), JPEG),
     HttpCase("circle_one_pixel", "image circle", "1x1 JPEG", "POST", CIRCLE, lambda s: s.black_jpeg(1, 1),
              Expect(422, "frame_too_small", "at least 32 px"), JPEG),
-    HttpCase("circle_random_bytes", "image circle", "4 kB of random bytes", "POST", CIRCLE,
-             lambda s: s.random_bytes, Expect(415, "unsupported_image", "neither JPEG nor PNG"), JPEG),
-    HttpCase("circle_jpeg_truncated", "image circle", "JPEG cut in half", "POST", CIRCLE,
-             lambda s: s.jpeg_truncated, Expect(400, "bad_image", "cannot decode"), JPEG),
-    HttpCase("circle_png_bomb_header", "image circle", "100-byte PNG whose header claims 100000x100000",
-             "POST", CIRCLE, _const(png_claiming(100_000, 100_000)),
-             Expect(413, "image_too_large", "100000x100000"), PNG),
-    HttpCase("circle_body_over_limit", "image circle", "2 MiB body with Content-Length (limit 1 MiB)",
-             "POST", CIRCLE, _const(bytes(2 * MAX_BODY_BYTES)),
-             Expect(413, "payload_too_large", "limit is 1048576"), JPEG),
-    HttpCase("circle_content_type_text", "image circle", "Content-Type: text/plain", "POST", CIRCLE,
-             lambda s: s.good_jpeg, Expect(415, "unsupported_media_type", "text/plain"),
-             {"content-type": "text/plain"}),
     HttpCase("circle_bad_altitude", "image circle", "altitude_m=-1", "POST", f"{CIRCLE}?altitude_m=-1",
              lambda s: s.good_jpeg, Expect(422, "invalid_request", "altitude_m"), JPEG),
 ]
