@@ -109,6 +109,8 @@ def render_errors(count: int, size: int) -> dict[str, float]:
         split = "unseen" if index % 2 else "seen"
         frame = render_frame(100 + index, split, index % 4, SynthConfig(size=size))
         bgr = cv2.imdecode(np.frombuffer(frame.jpeg, np.uint8), cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise SystemExit(f"cannot decode rendered frame {index}")
         try:
             circle = fit_image_circle(np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), dtype=np.uint8))
         except CalibrationError:

@@ -17,7 +17,8 @@ sensor there) and radius from the frame alone:
    outside the fitted circle, a centre outside the frame.
 
 `camera_from_circle` turns a circle into a starting camera: an ideal equidistant 180° lens whose 90°
-ring is the circle (`kb = [1]`, `fx = fy = R / (π/2)`).
+ring is the circle (`kb = [1]`, `fx = fy = R / (π/2)`); `camera_of_uncalibrated_frame` is the camera
+assumed for a frame nobody calibrated: its circle's, or the shorter side's where none shows.
 """
 
 from __future__ import annotations
