@@ -207,7 +207,8 @@ def _levels(grey: NDArray[np.float32]) -> _Levels:
     height, width = grey.shape
     border = float(np.percentile(grey, 1.0))
     yy, xx = np.ogrid[:height, :width]
-    middle = np.hypot(xx - (width - 1) / 2, yy - (height - 1) / 2) <= 0.25 * min(width, height)
+    # The scene's level over most of the middle, so a dark floor below the lens does not pass for it.
+    middle = np.hypot(xx - (width - 1) / 2, yy - (height - 1) / 2) <= 0.4 * min(width, height)
     scene = float(np.median(grey[middle]))
     if scene - border < _MIN_CONTRAST:
         raise CalibrationError(
@@ -355,11 +356,7 @@ def fit_image_circle(image: NDArray[np.uint8], frame_wh: tuple[int, int] | None 
     for _ in range(2):
         points, cut_rays = rim_points(grey, centre, levels.threshold, rays)
         if cut_rays >= 0.9 * rays:
-            raise CalibrationError(
-                f"no visible rim: {cut_rays} of {rays} rays from the frame's middle stay inside the "
-                "image circle up to the frame's edge (the circle covers the frame), so its centre and "
-                "radius cannot be measured; give the camera's principal point and focal, or use the "
-                "assumed camera", code="no_visible_rim")
+            raise _refused("almost no ray from the middle meets a dark border", cut_rays, rays)
         if len(points) < _MIN_RIM_POINTS:
             break
         tolerance = max(1.5, 0.005 * max(grey.shape))
@@ -370,10 +367,21 @@ def fit_image_circle(image: NDArray[np.uint8], frame_wh: tuple[int, int] | None 
             break
         centre = (circle[0], circle[1])
     if circle is None or inliers.sum() < _MIN_RIM_POINTS:
-        raise CalibrationError(
-            f"no image circle: {len(points)} rim points found along {rays} rays ({int(inliers.sum())} "
-            f"on one circle), {_MIN_RIM_POINTS} are needed", code="no_circle")
+        raise _refused(f"{len(points)} rim points found along {rays} rays ({int(inliers.sum())} on one "
+                       f"circle), {_MIN_RIM_POINTS} are needed", cut_rays, rays)
     return _checked(grey, circle, points, inliers, levels, (frame_w, frame_h), (sx, sy), (rays, cut_rays))
+
+
+def _refused(reason: str, cut_rays: int, rays: int) -> CalibrationError:
+    """The refusal for `reason`: `no_visible_rim` when most rays from the middle stay bright up to the
+    frame's edge (the circle seems to cover the frame), else `no_circle`."""
+    if cut_rays >= 0.5 * rays:
+        return CalibrationError(
+            f"no visible rim: {cut_rays} of {rays} rays from the frame's middle stay bright up to the "
+            f"frame's edge, so the image circle seems to cover the frame ({reason}); its centre and "
+            "radius cannot be measured: give the camera's principal point and focal, or use the "
+            "assumed camera", code="no_visible_rim")
+    return CalibrationError(f"no image circle: {reason}", code="no_circle")
 
 
 def _checked(grey: NDArray[np.float32], circle: tuple[float, float, float], points: FloatArray,
@@ -391,20 +399,12 @@ def _checked(grey: NDArray[np.float32], circle: tuple[float, float, float], poin
             f"{_MIN_RIM_ARC_DEG:.0f}° are needed to measure it)", code="no_visible_rim")
     fraction = float(inliers.mean())
     if fraction < _MIN_INLIER_FRACTION:
-        raise CalibrationError(
-            f"no image circle: only {fraction:.0%} of the {len(points)} rim points lie on one circle",
-            code="no_circle")
+        raise _refused(f"only {fraction:.0%} of the {len(points)} rim points lie on one circle",
+                       cut_rays, rays)
     bright = _bright_outside(grey, circle, levels.threshold, margin=max(3.0, 0.01 * circle[2]))
-    if bright is not None and bright > _MAX_BRIGHT_OUTSIDE and cut_rays >= 0.5 * rays:
-        raise CalibrationError(
-            f"no visible rim: {cut_rays} of {rays} rays stay bright up to the frame's edge and the "
-            f"frame beyond the best circle is bright too ({bright:.0%}): the image circle seems to "
-            "cover the frame; give the camera's principal point and focal, or use the assumed camera",
-            code="no_visible_rim")
     if bright is not None and bright > _MAX_BRIGHT_OUTSIDE:
-        raise CalibrationError(
-            f"no image circle: {bright:.0%} of the frame outside the fitted circle is bright; the "
-            "border around a fisheye's image circle is dark", code="no_circle")
+        raise _refused(f"{bright:.0%} of the frame outside the best circle is bright; the border around "
+                       "a fisheye's image circle is dark", cut_rays, rays)
     center = ((circle[0] + 0.5) * sx - 0.5, (circle[1] + 0.5) * sy - 0.5)
     radius = circle[2] * math.sqrt(sx * sy)
     if not (0 <= center[0] <= width - 1 and 0 <= center[1] <= height - 1):

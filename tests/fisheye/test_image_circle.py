@@ -173,3 +173,13 @@ def test_the_starting_camera_puts_its_90_degree_ring_on_the_circle() -> None:
     distance = np.hypot(uv[:, 0] - circle.center_px[0], uv[:, 1] - circle.center_px[1])
     np.testing.assert_allclose(distance, circle.radius_px, atol=0.01)
     assert load_camera(camera_to_dict(camera)) == camera  # a valid camera file
+
+
+def test_a_black_floor_below_the_lens_is_not_taken_for_the_border() -> None:
+    spec = CircleFrame((640, 640), (322.0, 317.0), 290.0, seed=8)
+    frame = draw_circle_frame(spec)
+    yy, xx = np.mgrid[:640, :640]
+    frame[np.hypot(xx - 320, yy - 320) < 120] = 4  # a black carpet round the nadir
+    circle = fit_image_circle(frame)
+    np.testing.assert_allclose(circle.center_px, spec.center_px, atol=0.5)
+    assert circle.radius_px == pytest.approx(spec.radius_px, abs=0.5)

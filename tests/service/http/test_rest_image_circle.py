@@ -89,7 +89,7 @@ def test_a_multipart_frame_is_read_from_its_image_field(live_server: LiveServer)
         (encode_jpeg(np.zeros((480, 640, 3), np.uint8)), {}, 422, "no_circle", "not brighter"),
         (encode_jpeg(np.full((480, 640, 3), 128, np.uint8)), {}, 422, "no_circle", "not brighter"),
         (encode_jpeg(draw_circle_frame(CircleFrame((640, 480), (319.5, 239.5), 2000.0))), {}, 422,
-         "no_visible_rim", "covers the frame"),
+         "no_visible_rim", "cover the frame"),
         (encode_jpeg(np.zeros((20, 20, 3), np.uint8)), {}, 422, "frame_too_small", "32 px"),
         (b"GIF89a" + bytes(100), {}, 415, "unsupported_image", "neither JPEG nor PNG"),
         (encode_jpeg(draw_circle_frame(INSIDE)), {"altitude_m": 0}, 422, "invalid_request", "altitude_m"),
