@@ -57,6 +57,7 @@ def test_ransac_ignores_outliers_and_says_which() -> None:
 
 # A frame's circle is found to a fraction of its radius; in px: (centre, radius) tolerance.
 FRAMES = {
+    "the smallest frame (32 px a side)": (CircleFrame((32, 32), (15.5, 15.5), 13.0), 0.5),
     "centred": (CircleFrame((640, 640), (319.5, 319.5), 300.0), 0.5),
     "off-centre": (CircleFrame((640, 480), (350.2, 228.7), 210.0), 0.5),
     "touching the short side": (CircleFrame((800, 600), (399.5, 299.5), 299.5), 0.5),
