@@ -38,7 +38,7 @@ from contract.detect import ContractModel
 from contract.views import DEFAULT_VIEW
 from detector.checkpoint import CheckpointError, load_checkpoint
 from detector.data.dataset import load_rgb
-from detector.data.readers import DatasetFormatError, FrameAnnotations, read_dataset
+from detector.data.readers import ASSUMED_LENSES, DatasetFormatError, FrameAnnotations, read_dataset
 from detector.graph import contract_info, contract_module
 from detector.metrics import (
     BOX_SIDE,
@@ -230,6 +230,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--limit", type=int, default=None, help="evaluate the first N frames only")
     parser.add_argument("--max-view-pixels", type=int, default=None,
                         help="a planned model's view budget, as fishloc serve --max-view-pixels")
+    parser.add_argument("--assumed-camera", choices=ASSUMED_LENSES, default="short-side",
+                        help="camera of frames without a calibration (CEPDOF/WEPDTOF files): the 180° "
+                             "circle that fills the frame's shorter side (default, DESIGN.md), or the "
+                             "one fitted to each frame's image circle (for circles wider than the frame)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -238,7 +242,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     try:
         model = load_contract_model(args.model)
-        frames = read_dataset(args.data)
+        frames = read_dataset(args.data, args.assumed_camera)
     except (CheckpointError, ModelError, DatasetFormatError) as error:
         print(f"fishloc eval: {error}", file=sys.stderr)
         return 2
@@ -257,7 +261,8 @@ def run(args: argparse.Namespace) -> int:
             predictor.default_min_score = args.min_score
         evaluation = evaluate(predictor, frames, progress=True)
         extra["nms_iou"] = predictor.runner.nms_iou
-    metrics = json_safe({**evaluation.metrics, **extra, "model": str(args.model), "data": str(args.data)})
+    metrics = json_safe({**evaluation.metrics, **extra, "model": str(args.model), "data": str(args.data),
+                         "assumed_camera": args.assumed_camera})
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
     if args.plots:

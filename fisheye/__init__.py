@@ -24,6 +24,7 @@ from fisheye.camera_file import (
     read_opencv_calibration,
     save_camera,
 )
+from fisheye.image_circle import ImageCircle, camera_from_circle, fit_image_circle
 from fisheye.letterbox import Letterbox
 from fisheye.rotated import polygon_iou, rotated_iou, rotated_nms
 from fisheye.ruler_marks import RulerMarks, read_marks_csv, simulate_ruler_marks
@@ -33,6 +34,7 @@ __all__ = [
     "CalibrationError",
     "FisheyeCamera",
     "FloorPoints",
+    "ImageCircle",
     "Letterbox",
     "MarkResiduals",
     "RulerFit",
@@ -41,11 +43,13 @@ __all__ = [
     "SitePose",
     "SitePoseFit",
     "assumed_camera",
+    "camera_from_circle",
     "camera_from_dict",
     "camera_from_opencv",
     "camera_to_dict",
     "cepdof_to_radius_aligned",
     "cxcywh_to_corners",
+    "fit_image_circle",
     "fit_ruler_calibration",
     "fit_site_pose",
     "foot_points",

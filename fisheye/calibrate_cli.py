@@ -3,6 +3,7 @@
     fishloc calibrate --marks marks.csv --altitude 3.2 --image-size 2952 2952 -o camera.yaml
     fishloc calibrate --opencv K_D.yaml --altitude 3.2 -o camera.yaml
     fishloc calibrate --check-altitude camera.yaml --marks marks.csv
+    fishloc calibrate --image-circle frame.jpg [--altitude 3] -o camera.yaml
 
 The marks.csv format is described in fisheye/ruler_marks.py and the README ("Calibration").
 """
@@ -21,12 +22,14 @@ from fisheye.altitude_check import check_altitude
 from fisheye.calibration import MAX_COEFFICIENTS, RulerFit, RulerFitConfig, fit_ruler_calibration
 from fisheye.camera import CAMERA_ID_PATTERN, FisheyeCamera
 from fisheye.camera_file import (
+    ASSUMED_ALTITUDE_M,
     CalibrationError,
     camera_from_opencv,
     load_camera,
     read_opencv_calibration,
     save_camera,
 )
+from fisheye.image_circle import camera_from_circle, fit_image_circle, starting_camera_notes
 from fisheye.ruler_marks import read_marks_csv
 
 _DEFAULT_ID = "camera"
@@ -38,6 +41,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="ruler marks: columns ruler,u,v,distance_m[,x_m,y_m] (distance 0 = nadir)")
     source.add_argument("--opencv", type=Path, metavar="FILE",
                         help="OpenCV fisheye calibration (FileStorage YAML/JSON, or YAML/JSON with K, D)")
+    source.add_argument("--image-circle", type=Path, metavar="FRAME",
+                        help="a frame (JPEG/PNG) of the camera: fit its image circle and write a starting "
+                             "camera, an equidistant 180° lens whose 90° ring is the circle (--altitude "
+                             f"defaults to {ASSUMED_ALTITUDE_M:g} m)")
     parser.add_argument("--altitude", type=float, metavar="M",
                         help="lens height above the floor (m); required unless --check-altitude")
     parser.add_argument("--image-size", type=int, nargs=2, metavar=("W", "H"),
@@ -152,6 +159,26 @@ def _from_opencv(args: argparse.Namespace, camera_id: str) -> FisheyeCamera:
     return camera
 
 
+def _from_image_circle(args: argparse.Namespace, camera_id: str) -> FisheyeCamera:
+    import cv2
+
+    bgr = cv2.imread(str(args.image_circle), cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+    if bgr is None:
+        raise CalibrationError(f"cannot read {args.image_circle} as an image (JPEG or PNG)")
+    circle = fit_image_circle(np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), dtype=np.uint8))
+    camera = camera_from_circle(circle, camera_id, args.altitude)
+    if args.image_size is not None and tuple(args.image_size) != camera.image_size:
+        try:
+            camera = camera.scaled_to(tuple(args.image_size))
+        except ValueError as error:
+            raise CalibrationError(f"image_size: {error}") from None
+    print(f"image circle: {int(circle.inliers.sum())} of {len(circle.inliers)} rim points on the circle, "
+          f"RMS {circle.rms_px:.2f} px")
+    for note in starting_camera_notes(circle, camera):
+        print(f"{'warning' if note.level == 'warning' else 'note'}: {note}")
+    return camera
+
+
 def _check_altitude(args: argparse.Namespace) -> int:
     try:
         if args.marks is None:
@@ -170,13 +197,20 @@ def _check_altitude(args: argparse.Namespace) -> int:
 def run(args: argparse.Namespace) -> int:
     if args.check_altitude is not None:
         return _check_altitude(args)
+    if args.image_circle is not None and args.altitude is None:
+        args.altitude = ASSUMED_ALTITUDE_M
     if args.altitude is None or args.output is None:
         print("fishloc calibrate: error: --altitude and -o/--output are required to fit or import a "
               "camera", file=sys.stderr)
         return 2
     camera_id = args.camera_id or _default_id(args.output)
     try:
-        camera = _from_marks(args, camera_id) if args.marks else _from_opencv(args, camera_id)
+        if args.marks:
+            camera = _from_marks(args, camera_id)
+        elif args.image_circle is not None:
+            camera = _from_image_circle(args, camera_id)
+        else:
+            camera = _from_opencv(args, camera_id)
         save_camera(camera, args.output)
     except (CalibrationError, OSError) as error:
         print(f"fishloc calibrate: error: {error}", file=sys.stderr)

@@ -5,7 +5,9 @@ FishLoc/LOAF-style files (what `fishloc synth` writes) give each person a radius
 LOAF release's `rotated_box: [cx, cy, w, h, angle_deg]` (angle counter-clockwise, see
 `fisheye.boxes.loaf_to_radius_aligned`) is read too.
 CEPDOF/WEPDTOF files give `bbox: [cx, cy, w, h, angle_deg]` and no camera; their frames get
-DESIGN.md's assumed camera (`fisheye.assumed_camera`, marked `camera_assumed`), keep the file's boxes
+DESIGN.md's assumed camera (`fisheye.assumed_camera`, marked `camera_assumed`; with
+`assumed_lens="image-circle"` the camera of each frame's fitted image circle instead, so a circle
+wider than the frame is not cut to its shorter side), keep the file's boxes
 as they are (`file_boxes_cxcywha`, what evaluation scores against) and have them turned
 radius-aligned about the image centre beside them. `read_dataset` tells the two apart by their
 annotations.
@@ -14,10 +16,11 @@ annotations.
 from __future__ import annotations
 
 import json
+import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,8 +34,14 @@ from fisheye import (
     loaf_to_radius_aligned,
 )
 from fisheye.boxes import cxcywh_to_corners
+from fisheye.image_circle import camera_of_uncalibrated_frame
 
 FloatArray = NDArray[np.float64]
+# What camera a frame without a calibration gets: the circle that fills its shorter side (DESIGN.md),
+# or the one fitted to its image circle.
+AssumedLens = Literal["short-side", "image-circle"]
+ASSUMED_LENSES: tuple[AssumedLens, ...] = ("short-side", "image-circle")
+_log = logging.getLogger(__name__)
 ANNOTATIONS_FILE = "annotations.json"
 
 
@@ -153,8 +162,26 @@ def sniff_format(data: Mapping[str, Any]) -> str:
     return "fishloc" if any("camera" in i for i in data.get("images") or []) else "cepdof"
 
 
+def _circle_camera(path: Path, width: int, height: int, where: str) -> FisheyeCamera:
+    """The camera of the frame's image circle (`fisheye.image_circle`), or the shorter side's where
+    it shows none (logged)."""
+    import cv2
+
+    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+    if bgr is None:
+        raise DatasetFormatError(f"{where}: cannot read {path} to fit its image circle")
+    rgb = np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), dtype=np.uint8)
+    if (rgb.shape[1], rgb.shape[0]) != (width, height):
+        raise DatasetFormatError(f"{where}: {path} is {rgb.shape[1]}x{rgb.shape[0]}, the file says "
+                                 f"{width}x{height}")
+    camera, note = camera_of_uncalibrated_frame(rgb)
+    if note.level == "warning":
+        _log.warning("%s: %s", where, note.message)
+    return camera
+
+
 def _frame(image: Mapping[str, Any], annotations: list[Mapping[str, Any]], folder: Path,
-           file_format: str, source: Path) -> FrameAnnotations:
+           file_format: str, source: Path, assumed_lens: AssumedLens = "short-side") -> FrameAnnotations:
     where = f"{source} image {image.get('id')!r}"
     try:
         width, height = int(image["width"]), int(image["height"])
@@ -168,7 +195,9 @@ def _frame(image: Mapping[str, Any], annotations: list[Mapping[str, Any]], folde
         except ValueError as error:
             raise DatasetFormatError(f"{where}: {error}") from None
     camera_assumed = file_format == "cepdof" and camera is None
-    if camera_assumed:
+    if camera_assumed and assumed_lens == "image-circle":
+        camera = _circle_camera(path, width, height, where)
+    elif camera_assumed:
         try:
             camera = assumed_camera(width, height)
         except ValueError as error:
@@ -237,8 +266,9 @@ def _frame(image: Mapping[str, Any], annotations: list[Mapping[str, Any]], folde
     )
 
 
-def read_dataset(path: str | Path) -> list[FrameAnnotations]:
-    """Every frame of an annotation file (or of a folder's `annotations.json`), in file order."""
+def read_dataset(path: str | Path, assumed_lens: AssumedLens = "short-side") -> list[FrameAnnotations]:
+    """Every frame of an annotation file (or of a folder's `annotations.json`), in file order;
+    `assumed_lens` says what camera a frame without a calibration gets (see AssumedLens)."""
     source = Path(path)
     if source.is_dir():
         source = source / ANNOTATIONS_FILE
@@ -255,7 +285,9 @@ def read_dataset(path: str | Path) -> list[FrameAnnotations]:
     for annotation in data.get("annotations") or []:
         if int(annotation.get("category_id", 1)) == 1:
             by_image.setdefault(annotation.get("image_id"), []).append(annotation)
-    return [_frame(image, by_image.get(image.get("id"), []), source.parent, file_format, source)
+    if assumed_lens not in ASSUMED_LENSES:
+        raise ValueError(f"assumed_lens must be one of {ASSUMED_LENSES}, got {assumed_lens!r}")
+    return [_frame(image, by_image.get(image.get("id"), []), source.parent, file_format, source, assumed_lens)
             for image in data["images"]]
 
 

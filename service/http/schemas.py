@@ -111,6 +111,31 @@ class CameraView(FisheyeCamera):
     view: dict[str, Any] | None = None
 
 
+class CircleCutSides(BaseModel):
+    top: bool = Field(description="the circle passes beyond the frame's top edge")
+    bottom: bool
+    left: bool
+    right: bool
+    visible_rim_fraction: float = Field(description="fraction of the rim's length inside the frame")
+
+
+class FittedCircle(BaseModel):
+    center_px: tuple[float, float] = Field(description="[u0, v0] (frame px): the principal point")
+    radius_px: float = Field(description="R (frame px)")
+    cut: CircleCutSides
+    inlier_fraction: float = Field(description="rim points found that lie on the circle")
+    rms_px: float = Field(description="RMS distance of those from the circle (frame px)")
+    rim_points: int = Field(description="rim points found along the rays")
+    rays: int = Field(description="rays cast from the centre")
+
+
+class ImageCircleFit(BaseModel):
+    circle: FittedCircle
+    camera: FisheyeCamera = Field(description="a starting camera: equidistant 180° lens, kb [1], "
+                                              "fx = fy = R / (π/2), max_theta_deg 90 (not saved)")
+    notes: list[FitNote]
+
+
 class CameraList(BaseModel):
     cameras: list[FisheyeCamera]
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 from numpy.typing import NDArray
 
 from contract import FrameDetections
@@ -78,3 +79,26 @@ def test_no_floor_error_is_measured_with_an_assumed_camera(tmp_path: Path) -> No
     metrics = evaluate(FixedPredictor([HUGS_SITTING], [0.9]), [frame]).metrics
     assert metrics["AP50"] == 1.0
     assert metrics["PE_matches"] == 0.0 and math.isnan(metrics["mPE"]) and math.isnan(metrics["mPE_center"])
+
+
+@pytest.mark.parametrize("assumed", ["short-side", "image-circle"])
+def test_eval_takes_the_assumed_camera_of_uncalibrated_frames(tmp_path: Path, assumed: str) -> None:
+    """`fishloc eval --assumed-camera image-circle` gives each CEPDOF frame the camera of its fitted
+    circle (here wider than the frame) and says which assumption it made."""
+    from models import DEFAULT_MODEL_PATH
+    from service.cli import main
+    from tests.fisheye.circle_frames import CircleFrame, draw_circle_frame
+
+    frame = draw_circle_frame(CircleFrame((656, 540), (330.0, 268.0), 322.0))
+    cv2.imwrite(str(tmp_path / "wide.png"), frame)
+    data = tmp_path / "wide.json"
+    data.write_text(json.dumps({
+        "images": [{"id": "w", "file_name": "wide.png", "width": 656, "height": 540}],
+        "annotations": [{"id": 1, "image_id": "w", "category_id": 1,
+                         "bbox": [600.0, 270.0, 20.0, 50.0, 0.0]}],
+    }))
+    out = tmp_path / "metrics.json"
+    assert main(["eval", "--model", str(DEFAULT_MODEL_PATH), "--data", str(data), "--json", str(out),
+                 "--assumed-camera", assumed]) == 0
+    metrics = json.loads(out.read_text())
+    assert metrics["assumed_camera"] == assumed and metrics["mPE"] is None

@@ -199,3 +199,36 @@ def test_check_altitude_reports_the_fitted_beside_the_configured(marks_csv: Path
     assert "needs --marks" in capsys.readouterr().err
     assert main(["calibrate", "--marks", str(marks_csv), "--image-size", "2952", "2952"]) == 2
     assert "--altitude and -o/--output are required" in capsys.readouterr().err
+
+
+def test_calibrate_from_the_image_circle(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from tests.fisheye.circle_frames import CircleFrame, draw_circle_frame, encode_jpeg
+
+    spec = CircleFrame((1312, 1080), (655.0, 541.0), 650.0, jpeg_quality=85)
+    frame = tmp_path / "hall.jpg"
+    frame.write_bytes(encode_jpeg(draw_circle_frame(spec)))
+    output = tmp_path / "hall-3.yaml"
+    assert main(["calibrate", "--image-circle", str(frame), "-o", str(output)]) == 0
+    camera = load_camera(output)
+    assert camera.id == "hall-3" and camera.altitude_m == 3.0 and camera.kb == [1.0]
+    np.testing.assert_allclose(camera.principal_point, spec.center_px, atol=1.0)
+    assert camera.focal_px[0] == pytest.approx(spec.radius_px / (np.pi / 2), abs=1.0)
+    printed = capsys.readouterr().out
+    assert "cuts the circle at its top, bottom" in printed and "starting camera" in printed
+
+
+@pytest.mark.parametrize(("content", "message"), [
+    (b"", "cannot read"),
+    (b"not an image", "cannot read"),
+    (None, "no image circle"),
+])
+def test_calibrate_from_the_image_circle_refuses_frames_without_one(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], content: bytes | None, message: str) -> None:
+    frame = tmp_path / "frame.png"
+    if content is None:
+        cv2.imwrite(str(frame), np.zeros((480, 640, 3), np.uint8))
+    else:
+        frame.write_bytes(content)
+    output = tmp_path / "camera.yaml"
+    assert main(["calibrate", "--image-circle", str(frame), "-o", str(output)]) == 2
+    assert message in capsys.readouterr().err and not output.exists()

@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import sys
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from reliability_samples import Samples, jpeg_claiming, png_claiming, png_zero_bomb
@@ -240,7 +240,23 @@ CAMERA_CASES: list[HttpCase] = [
              Expect(405, "method_not_allowed", "Method Not Allowed")),
 ]
 
-ALL_CASES = FRAME_CASES + CAMERA_CASES
+CIRCLE = "/v1/calibrations/image-circle"
+
+# POST /v1/calibrations/image-circle reads its body as detect does: the same refusals, and its own.
+_CIRCLE_LIKE_DETECT = ("random_bytes", "jpeg_truncated", "png_bomb_header", "body_over_limit",
+                       "content_type_text")
+CIRCLE_CASES: list[HttpCase] = [
+    *(replace(case, name=f"circle_{case.name}", area="image circle", path=CIRCLE)
+      for case in FRAME_CASES if case.name in _CIRCLE_LIKE_DETECT),
+    HttpCase("circle_black_frame", "image circle", "all-black 640x480 frame", "POST", CIRCLE,
+             lambda s: s.black_jpeg(640, 480), Expect(422, "no_circle", "not brighter"), JPEG),
+    HttpCase("circle_one_pixel", "image circle", "1x1 JPEG", "POST", CIRCLE, lambda s: s.black_jpeg(1, 1),
+             Expect(422, "frame_too_small", "at least 32 px"), JPEG),
+    HttpCase("circle_bad_altitude", "image circle", "altitude_m=-1", "POST", f"{CIRCLE}?altitude_m=-1",
+             lambda s: s.good_jpeg, Expect(422, "invalid_request", "altitude_m"), JPEG),
+]
+
+ALL_CASES = FRAME_CASES + CAMERA_CASES + CIRCLE_CASES
 
 
 # ----- non-request scenarios: what each test does and observes (the tests assert these statuses)

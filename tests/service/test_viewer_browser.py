@@ -10,6 +10,7 @@ they are there. Screenshots go to artifacts/ (CI keeps them).
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -371,3 +372,66 @@ def test_javascript_pixels_to_floor_match_python(
     placed = np.array([xy for xy in got if xy is not None])
     np.testing.assert_allclose(placed, want[~missing], rtol=0, atol=0.001)
     np.testing.assert_allclose(placed[-2:], [[0.0, 0.0], [7.5, -2.0]], atol=1e-6)
+
+
+CIRCLE_STATE_JS = """
+const group = document.querySelector('#cal-frame g.image-circle');
+const rim = group && group.querySelector('circle.image-circle-rim');
+const cal = window.fishlocViewer.calibrate;
+return {
+  circles: Number(document.body.dataset.circles || 0),
+  drawn: group && {u: Number(group.dataset.u), v: Number(group.dataset.v), r: Number(group.dataset.r),
+                   cx: Number(rim.getAttribute('cx')), cy: Number(rim.getAttribute('cy')),
+                   rim_r: Number(rim.getAttribute('r')),
+                   centre: group.querySelector('path.image-circle-centre').getAttribute('d')},
+  answer: cal.circle, start: cal.start, rings: document.querySelectorAll('#cal-frame g.overlay .ring').length,
+  altitude: document.getElementById('cal-altitude').value,
+  info: document.getElementById('cal-circle-info').textContent,
+  status: document.getElementById('status').textContent,
+};
+"""
+
+
+def test_fit_image_circle_draws_the_routes_circle_and_starts_the_camera_from_it(
+    driver: Any, server: LiveServer, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A camera nobody calibrated, its circle wider than the frame: the button draws the route's
+    circle and centre, the circle's lens becomes the starting camera, and Save puts that camera."""
+    from calibrate_page import cal_state, open_calibrate, settled, upload_frame
+    from selenium.webdriver.common.by import By
+
+    from tests.fisheye.circle_frames import CircleFrame, draw_circle_frame, encode_png
+
+    png = encode_png(draw_circle_frame(CircleFrame((656, 540), (327.5, 271.0), 325.0, seed=6)))
+    path = tmp_path / "wide.png"
+    path.write_bytes(png)
+    route = httpx.post(f"{server.url}/v1/calibrations/image-circle", content=png,
+                       params={"camera_id": "hall-9"}, headers={"content-type": "image/png"}, timeout=30)
+    assert route.status_code == 200, route.text
+    answer = route.json()
+    open_calibrate(driver, server.url, "hall-9")
+    upload_frame(driver, path)
+    driver.find_element(By.ID, "cal-circle").click()
+    def fitted() -> dict[str, Any] | None:
+        state: dict[str, Any] = driver.execute_script(CIRCLE_STATE_JS)
+        return state if state["circles"] == 1 else None
+
+    state = wait_for(fitted, "the image circle")
+    assert state["answer"] == answer
+    (u0, v0), radius = answer["circle"]["center_px"], answer["circle"]["radius_px"]
+    drawn = state["drawn"]
+    assert (drawn["u"], drawn["v"], drawn["r"]) == (u0, v0, radius)
+    assert (drawn["cx"], drawn["cy"], drawn["rim_r"]) == (u0, v0, radius)
+    numbers = [float(n) for n in re.split(r"[MHV ]+", drawn["centre"]) if n]
+    assert numbers[1] == pytest.approx(v0) and numbers[3] == pytest.approx(u0)  # the cross is on the centre
+    assert state["start"] == answer["camera"] and state["altitude"] == "3"
+    assert state["rings"] > 0  # the starting lens is drawn
+    assert "cut by the frame at its top, bottom" in state["status"] and "starting lens" in state["status"]
+    assert "radius" in state["info"]
+    save_screenshot(driver, "calibrate-image-circle.png", capsys)
+    driver.find_element(By.ID, "cal-save").click()
+    wait_for(lambda: cal_state(driver)["saves"] == 1, "the save")
+    saved = httpx.get(f"{server.url}/v1/cameras/hall-9").json()
+    assert saved == answer["camera"] | {"masks_px": []}
+    assert settled(driver)["camera"] == saved
+    assert console_errors(driver) == []

@@ -1,16 +1,18 @@
-"""Fit a camera from ruler marks without saving it: the fitting of `fishloc calibrate --marks`.
+"""Fit a camera without saving it: from ruler marks (`fishloc calibrate --marks`), or a starting
+camera from a frame's image circle (`fishloc calibrate --image-circle`).
 
-The answer holds the fitted camera, every mark's residual and coded notes, for a viewer to show at
-once; saving the camera is a `PUT /v1/cameras/{id}`. Nothing is written here.
+The answers hold the fitted camera and coded notes (and every mark's residual, or the circle), for a
+viewer to show at once; saving the camera is a `PUT /v1/cameras/{id}`. Nothing is written here.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from fastapi import APIRouter, Request
+from fastapi import APIRouter, Query, Request
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from starlette.concurrency import run_in_threadpool
@@ -24,13 +26,23 @@ from fisheye import (
     fit_ruler_calibration,
 )
 from fisheye.arrays import resolution_scale, scale_pixels
-from fisheye.calibration import MAX_COEFFICIENTS
+from fisheye.calibration import MAX_COEFFICIENTS, FitNote
 from fisheye.camera import CAMERA_ID_PATTERN
-from fisheye.camera_file import describe_validation_error
-from service.core.errors import ApiError
+from fisheye.camera_file import ASSUMED_ALTITUDE_M, describe_validation_error
+from fisheye.image_circle import (
+    MIN_SIDE_PX,
+    WORK_SIDE_PX,
+    ImageCircle,
+    camera_from_circle,
+    fit_image_circle,
+    starting_camera_notes,
+)
+from service.core.errors import ApiError, frame_error
+from service.frame_decode import FrameError, check_frame_size, decode_frame, read_header
 from service.http.dependencies import State
 from service.http.request_body import BodyLimits, read_json
-from service.http.schemas import CalibrationFit, error_responses, inline_schema
+from service.http.routes.detect import FRAME_REQUEST_BODY, frame_bytes, frame_media_type
+from service.http.schemas import CalibrationFit, ImageCircleFit, error_responses, inline_schema
 
 router = APIRouter(tags=["calibrations"])
 
@@ -111,6 +123,10 @@ def fit_request(request: FitRequest) -> RulerFit:
                                  request.camera_id, config)
 
 
+def notes_to_json(notes: Sequence[FitNote]) -> list[dict[str, str]]:
+    return [{"code": note.code, "level": note.level, "message": note.message} for note in notes]
+
+
 def _number(value: float, digits: int) -> float | None:
     return round(float(value), digits) if math.isfinite(value) else None
 
@@ -135,7 +151,7 @@ def fit_to_json(request: FitRequest, fit: RulerFit) -> dict[str, Any]:
         "max_abs_m": _number(fit.max_abs_m, 5),
         "theta_max_marked_deg": round(fit.theta_max_marked_deg, 3),
         "monotonic_constrained": fit.monotonic_constrained,
-        "notes": [{"code": note.code, "level": note.level, "message": note.message} for note in fit.notes],
+        "notes": notes_to_json(fit.notes),
     }
 
 
@@ -164,3 +180,62 @@ async def fit_calibration(request: Request, state: State) -> JSONResponse:
     # The camera record leaves its unset fields out, as GET /v1/cameras/{id} does: not through the
     # response model, which would write them as null.
     return JSONResponse(fit_to_json(fit_body, fit))
+
+
+def circle_to_json(circle: ImageCircle) -> dict[str, Any]:
+    """The `circle` of the image-circle answer (frame px)."""
+    cut = circle.cut
+    return {
+        "center_px": [round(circle.center_px[0], 3), round(circle.center_px[1], 3)],
+        "radius_px": round(circle.radius_px, 3),
+        "cut": {"top": cut.top, "bottom": cut.bottom, "left": cut.left, "right": cut.right,
+                "visible_rim_fraction": round(cut.visible_rim_fraction, 4)},
+        "inlier_fraction": round(circle.inlier_fraction, 4),
+        "rms_px": round(circle.rms_px, 3),
+        "rim_points": len(circle.inliers),
+        "rays": circle.rays,
+    }
+
+
+def fit_frame_circle(data: bytes, max_pixels: int, camera_id: str, altitude_m: float) -> dict[str, Any]:
+    """An encoded frame -> the image-circle answer; FrameError for an unusable image,
+    CalibrationError when it shows no measurable circle."""
+    header = read_header(data)
+    check_frame_size(header, max_pixels, MIN_SIDE_PX)
+    # Decoded at a reduced scale where libjpeg allows: the fit works at WORK_SIDE_PX a side anyway.
+    frame = decode_frame(data, WORK_SIDE_PX, max_pixels, header)
+    circle = fit_image_circle(frame.rgb, frame.frame_wh)
+    camera = camera_from_circle(circle, camera_id, altitude_m)
+    return {"circle": circle_to_json(circle), "camera": camera_to_dict(camera),
+            "notes": notes_to_json(starting_camera_notes(circle, camera))}
+
+
+@router.post(
+    "/v1/calibrations/image-circle", response_model=ImageCircleFit,
+    responses=error_responses(400, 408, 413, 415, 422),
+    summary="Fit a frame's image circle and a starting camera from it (nothing is saved)",
+    description="Body: the encoded frame (image/jpeg, image/png) or a multipart form with the field "
+                "`image`. Finds the bright disk the fisheye draws on the sensor's dark border (also when "
+                "the frame cuts it) and answers its centre and radius, where the frame cuts it, the fit's "
+                "quality, and a starting camera: an ideal equidistant 180° lens whose 90° ring is the "
+                "circle. A frame without a measurable circle is a 422 whose `code` says why (no_circle, "
+                "no_visible_rim, frame_too_small). Save the camera with `PUT /v1/cameras/{id}`.",
+    openapi_extra={"requestBody": FRAME_REQUEST_BODY},
+)
+async def fit_image_circle_route(
+    request: Request,
+    state: State,
+    altitude_m: float = Query(ASSUMED_ALTITUDE_M, gt=0, le=1000,
+                              description="lens height above the floor (m) of the starting camera"),
+    camera_id: str = Query("camera", pattern=CAMERA_ID_PATTERN, description="id of the starting camera"),
+) -> JSONResponse:
+    media_type = frame_media_type(request)
+    data = await frame_bytes(request, media_type, state)
+    try:
+        answer = await run_in_threadpool(fit_frame_circle, data, state.settings.max_pixels, camera_id,
+                                         altitude_m)
+    except FrameError as error:
+        raise frame_error(error) from None
+    except CalibrationError as error:
+        raise ApiError(422, error.code, str(error)) from None
+    return JSONResponse(answer)

@@ -28,7 +28,7 @@ router = APIRouter(tags=["detect"])
 # A raw body is recognised by its bytes (JPEG or PNG), whichever of these types it is sent as.
 RAW_TYPES = frozenset({"image/jpeg", "image/jpg", "image/png", "application/octet-stream"})
 _BINARY = {"schema": {"type": "string", "format": "binary"}}
-_REQUEST_BODY = {"required": True, "content": {
+FRAME_REQUEST_BODY = {"required": True, "content": {
     "image/jpeg": _BINARY, "image/png": _BINARY, "application/octet-stream": _BINARY,
     "multipart/form-data": {"schema": {"type": "object", "required": ["image"],
                                        "properties": {"image": {"type": "string", "format": "binary"}}}},
@@ -91,7 +91,7 @@ async def frame_bytes(request: Request, media_type: str, state: ServiceState) ->
     description="Body: the encoded frame (image/jpeg, image/png) or a multipart form with the field "
                 "`image`. Positions are in metres in the camera's floor frame (origin at the nadir, "
                 "x towards image right, y towards image top); null when a foot point has no floor point.",
-    openapi_extra={"requestBody": _REQUEST_BODY},
+    openapi_extra={"requestBody": FRAME_REQUEST_BODY},
 )
 async def detect(
     request: Request,

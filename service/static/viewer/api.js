@@ -47,6 +47,18 @@ export const api = {
   /** Fit a camera from ruler marks without saving it (POST /v1/calibrations/fit). */
   fitCalibration: (body, token = "") => sendJson("POST", "/v1/calibrations/fit", body, token),
 
+  /** The image circle of an encoded frame (a Blob) and a starting camera from it, nothing saved
+   *  (POST /v1/calibrations/image-circle); `altitudeM` null keeps the service's default. */
+  async fitImageCircle(blob, cameraId, altitudeM = null) {
+    const query = new URLSearchParams({ camera_id: cameraId });
+    if (altitudeM !== null) query.set("altitude_m", String(altitudeM));
+    const response = await fetch(`/v1/calibrations/image-circle?${query}`, {
+      method: "POST", headers: { "Content-Type": blob.type || "image/jpeg" }, body: blob, cache: "no-store",
+    });
+    if (!response.ok) throw await failure(response);
+    return response.json();
+  },
+
   /** The latest frame's record of a camera, or null when it has had none. */
   async latest(cameraId) {
     try {

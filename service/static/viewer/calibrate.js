@@ -4,6 +4,11 @@
 // masks, and save the camera with PUT /v1/cameras/{id}: nothing is written before Save. The Check
 // tool then gives the floor position of any clicked pixel by the saved calibration.
 //
+// Fit image circle (POST /v1/calibrations/image-circle) draws the frame's image circle and its
+// centre; for a camera not calibrated yet, that centre is the fit's starting principal point while
+// no nadir is clicked, and the circle's 180° equidistant lens the starting lens (drawn, and saved
+// when there are no marks).
+//
 // Marks and masks are kept in frame pixels; the fit is sent them with the frame's size, while
 // marks.csv and `masks_px` are at the image size (u' = (u + 0.5)·s − 0.5 when the frame has another
 // resolution of the same aspect ratio).
@@ -34,7 +39,10 @@ const HINTS = {
 export const calibrateState = {
   cameraId: null,
   camera: null,        // the saved record
-  frame: null,         // {url, width, height, source}
+  frame: null,         // {url, blob, width, height, source}
+  circle: null,        // the image-circle answer for the shown frame (frame px)
+  start: null,         // the starting camera from it, for a camera with no calibration yet
+  circles: 0,          // image circles fitted
   marks: [],           // [{id, ruler, u, v, distance_m, x_m, y_m}] frame px
   masks: [],           // [[[u, v], ...]] frame px
   drawing: [],         // the mask being drawn
@@ -98,11 +106,20 @@ function fitRequest() {
       ruler: m.ruler, u: m.u, v: m.v, distance_m: m.distance_m, ...(m.x_m !== null ? { x_m: m.x_m, y_m: m.y_m } : {}),
     })),
     options: {
+      ...startingPrincipalPoint(size),
       coefficients: Number($("cal-coefficients").value),
       fit_principal_point: $("cal-fit-pp").checked,
       fit_tilt: $("cal-fit-tilt").checked,
     },
   };
+}
+
+/** `{principal_point}` at image size `size` from the image circle while the camera has no calibration
+ *  and no nadir is clicked; `{}` otherwise (the nadir mark gives it). */
+function startingPrincipalPoint(size) {
+  if (!cal.start || !cal.circle || cal.marks.some((m) => m.distance_m === 0)) return {};
+  const [point] = rescalePoints([cal.circle.circle.center_px], frameWh(), size);
+  return { principal_point: point };
 }
 
 async function fitOnce() {
@@ -148,7 +165,7 @@ function residuals() {
 
 /** The camera drawn over the frame: the fit, else the saved calibration; scaled to the frame. */
 function shownCamera() {
-  const camera = cal.fit ? cal.fit.camera : cal.camera;
+  const camera = cal.fit ? cal.fit.camera : (cal.camera ?? cal.start);
   try {
     return camera && cal.frame ? scaledCamera(camera, frameWh()) : null;
   } catch {
@@ -168,7 +185,7 @@ function renderFrame() {
   const next = calibrateOverlay({
     camera: shownCamera(), frameWh: frameWh(), showRings: $("cal-rings").checked, marks: cal.marks,
     residuals: residuals(), selected: cal.selected, masks: cal.masks, drawing: cal.drawing, checks: cal.checks,
-    screenPerFrame: zoom.view().screenPerFrame,
+    circle: cal.circle?.circle ?? null, screenPerFrame: zoom.view().screenPerFrame,
   });
   if (overlay) overlay.replaceWith(next);
   else root.append(next);
@@ -182,6 +199,7 @@ function render() {
   renderPanel(cal, residuals(), scaledTo);
   cal.renders += 1;
   document.body.dataset.calibrate = `${cal.cameraId}:${cal.fitsDone}/${cal.fitsWanted}${cal.fitting ? ":fitting" : ""}`;
+  document.body.dataset.circles = String(cal.circles);
 }
 
 // ----- frames
@@ -201,7 +219,8 @@ async function loadFrame(blob, source) {
     return { ...m, u, v };
   });
   cal.masks = old ? cal.masks.map(carry) : savedMasks([width, height]);
-  cal.frame = { url, width, height, source };
+  cal.frame = { url, blob, width, height, source };
+  cal.circle = null; // fitted on the frame it was drawn over
   cal.frames += 1;
   if ($("cal-width").value === "" && $("cal-height").value === "") { // a new camera: calibrate at the frame's size
     $("cal-width").value = String(width);
@@ -229,6 +248,25 @@ async function loadLatest() {
   if (blob === null) return loadLatest();
   await loadFrame(blob, `latest frame #${record.sequence}`);
   return record.sequence;
+}
+
+async function fitCircle() {
+  if (!cal.frame) throw new Error("no frame yet: press Latest frame or upload one");
+  const altitude = Number($("cal-altitude").value);
+  const answer = await api.fitImageCircle(cal.frame.blob, cal.cameraId, altitude > 0 ? altitude : null);
+  cal.circle = answer;
+  cal.circles += 1;
+  const { center_px: [u0, v0], radius_px: radius, cut } = answer.circle;
+  const sides = ["top", "bottom", "left", "right"].filter((side) => cut[side]);
+  let use = "the saved calibration stays the lens";
+  if (!cal.camera) { // nobody calibrated this camera: the circle's lens is where it starts
+    cal.start = answer.camera;
+    if (!(altitude > 0)) $("cal-altitude").value = String(answer.camera.altitude_m);
+    use = "its centre is the starting principal point and its 180° lens the starting lens";
+  }
+  report(`image circle: centre (${fmt(u0, 1)}, ${fmt(v0, 1)}) px, radius ${fmt(radius, 1)} px` +
+         (sides.length ? `, cut by the frame at its ${sides.join(", ")}` : "") + `; ${use}`);
+  await refit({ changed: !cal.camera });
 }
 
 // ----- editing
@@ -345,7 +383,7 @@ async function save() {
   if (cal.fitting || cal.fitsDone < cal.fitsWanted) throw new Error("the fit is not finished yet");
   const lensWh = (cal.fit?.camera ?? cal.camera)?.image_size;
   if (cal.frame && lensWh && scalableTo(lensWh) instanceof Error) throw scalableTo(lensWh); // masks could not follow
-  const record = cameraRecord({ cameraId: cal.cameraId, saved: cal.camera, marks: cal.marks, fit: cal.fit,
+  const record = cameraRecord({ cameraId: cal.cameraId, saved: cal.camera, start: cal.start, marks: cal.marks, fit: cal.fit,
                                 fitError: cal.fitError, masks: cal.frame ? cal.masks : null, frameWh: cal.frame ? frameWh() : null });
   const saved = await api.putCamera(cal.cameraId, record, $("cal-token").value.trim());
   cal.camera = saved;
@@ -390,6 +428,7 @@ function wire() {
     if (file) await loadFrame(file, `uploaded ${file.name}`);
   }));
   $("cal-latest").addEventListener("click", guarded(loadLatest));
+  $("cal-circle").addEventListener("click", guarded(fitCircle));
   $("cal-whole").addEventListener("click", () => zoom.whole());
   $("cal-one").addEventListener("click", () => zoom.oneToOne());
   $("cal-rings").addEventListener("change", () => renderFrame());
@@ -451,7 +490,7 @@ export async function openCalibrate(cameraId, cameras, setStatus) {
   if (cal.cameraId !== cameraId) {
     if (cal.frame) URL.revokeObjectURL(cal.frame.url);
     Object.assign(cal, { cameraId, camera, frame: null, marks: [], masks: [], drawing: [], checks: [], selected: null,
-                         fit: null, fitIds: [], fitError: null, unsaved: false });
+                         fit: null, fitIds: [], fitError: null, unsaved: false, circle: null, start: null });
     $("cal-check").textContent = "";
     $("cal-altitude").value = camera ? String(camera.altitude_m) : "";
     $("cal-width").value = camera ? String(camera.image_size[0]) : "";

@@ -18,17 +18,18 @@ export function marksFromCsv(text, source, imageWh, frameWh, firstId) {
 }
 
 /**
- * The record Save writes: the fitted lens (or, with no marks, the saved one), the saved camera's
+ * The record Save writes: the fitted lens (or, with no marks, the saved one, else `start`: the
+ * starting camera of the frame's image circle), the saved camera's
  * `site` and `site_pose`, and `masks` (frame px of a `frameWh` frame; null keeps the saved ones).
  * Throws an Error when the marks give no camera to save.
  */
-export function cameraRecord({ cameraId, saved, marks, fit, fitError, masks, frameWh }) {
+export function cameraRecord({ cameraId, saved, start = null, marks, fit, fitError, masks, frameWh }) {
   if (marks.length && !fit) {
     throw new Error(`the marks give no calibration yet (${fitError ?? "fitting"}); fix them, or delete them to ` +
                     "save the masks alone");
   }
-  const lens = fit ? fit.camera : saved;
-  if (!lens) throw new Error(`camera ${cameraId} is not in the registry and has no fit`);
+  const lens = fit ? fit.camera : (saved ?? start);
+  if (!lens) throw new Error(`camera ${cameraId} is not in the registry and has no fit: click marks, or fit the image circle`);
   const place = Object.fromEntries(["site", "site_pose"].filter((k) => saved?.[k] != null).map((k) => [k, saved[k]]));
   const masksPx = masks === null ? (saved?.masks_px ?? []) : masks.map((points) => rescalePoints(points, frameWh, lens.image_size));
   return { ...lens, ...place, id: cameraId, masks_px: masksPx };

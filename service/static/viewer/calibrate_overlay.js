@@ -1,5 +1,5 @@
 // What the Calibrate mode draws over its frame, in frame pixels: the fitted camera's floor rings
-// and each tape's fitted direction, the masks, the ruler marks coloured by their residual, and the
+// and each tape's fitted direction, the frame's fitted image circle and its centre, the masks, the ruler marks coloured by their residual, and the
 // floor points the Check tool was clicked at. Sizes are in screen pixels, whatever the zoom.
 
 import { fmt, pointsAttr, svg } from "./dom.js";
@@ -93,6 +93,17 @@ function marksLayer(marks, residuals, selected, fontPx, screenPerFrame) {
   return layer;
 }
 
+/** The image circle of POST /v1/calibrations/image-circle ({center_px, radius_px}, frame px) and a
+ *  cross at its centre. */
+function circleLayer(circle, fontPx) {
+  const [u0, v0] = circle.center_px;
+  const s = fontPx * 0.8;
+  return svg("g", { class: "image-circle", "data-u": u0, "data-v": v0, "data-r": circle.radius_px }, [
+    svg("circle", { class: "image-circle-rim", cx: u0, cy: v0, r: circle.radius_px }),
+    svg("path", { class: "image-circle-centre", d: `M ${u0 - s} ${v0} H ${u0 + s} M ${u0} ${v0 - s} V ${v0 + s}` }),
+  ]);
+}
+
 function checksLayer(checks, fontPx) {
   const layer = svg("g", { class: "checks" });
   for (const check of checks) {
@@ -107,11 +118,12 @@ function checksLayer(checks, fontPx) {
 /**
  * The overlay <g> for the frame: `camera` (scaled to the frame, or null) gives the rings and tape
  * directions; marks [{id, ruler, u, v, distance_m, x_m, y_m}], residuals Map id -> {err_m, err_px},
- * masks [[[u, v], ...]], drawing (a mask in progress), checks [{u, v, xy}], all in frame pixels;
+ * masks [[[u, v], ...]], drawing (a mask in progress), checks [{u, v, xy}], the image circle
+ * ({center_px, radius_px} or null), all in frame pixels;
  * `screenPerFrame` sets the text size.
  */
 export function calibrateOverlay({ camera, frameWh, showRings, marks, residuals, selected, masks, drawing, checks,
-                                   screenPerFrame }) {
+                                   circle = null, screenPerFrame }) {
   const fontPx = 13 / screenPerFrame;
   const overlay = svg("g", { class: "overlay" });
   if (camera && showRings) {
@@ -122,6 +134,7 @@ export function calibrateOverlay({ camera, frameWh, showRings, marks, residuals,
       overlay.append(svg("text", { class: "frame-error", x: 0, y: fontPx * 1.5, "font-size": fontPx }, [error.message]));
     }
   }
+  if (circle) overlay.append(circleLayer(circle, fontPx));
   overlay.append(masksLayer(masks, drawing, fontPx));
   overlay.append(marksLayer(marks, residuals, selected, fontPx, screenPerFrame));
   overlay.append(checksLayer(checks, fontPx));

@@ -58,6 +58,12 @@ function renderResult(cal, scaledTo) {
       (cal.fitting ? " (fitting…)" : "")
     : (cal.fitting ? "fitting…" : "");
   $("cal-error").textContent = cal.fitError ?? "";
+  const circle = cal.circle?.circle;
+  $("cal-circle-info").textContent = circle
+    ? `image circle: centre ${fmtPair(circle.center_px, 1)} px, radius ${fmt(circle.radius_px, 1)} px, ` +
+      `${fmt(circle.cut.visible_rim_fraction * 100, 0)} % of its rim in the frame, ` +
+      `${fmt(circle.inlier_fraction * 100, 0)} % of rim points on it, RMS ${fmt(circle.rms_px, 2)} px`
+    : "";
   // A note is {code, level, message} (or a plain message): warnings say what to add or change.
   const notes = (fit ? fit.notes : []).map((note) => (typeof note === "string" ? { message: note } : note));
   $("cal-notes").replaceChildren(...notes.map((note) => html("li", {

@@ -252,3 +252,52 @@ def test_rotated_box_of_another_length_is_refused(tmp_path: Path) -> None:
     }))
     with pytest.raises(DatasetFormatError, match="rotated_box must hold 4 numbers"):
         read_dataset(path)
+
+
+def _cepdof_file(tmp_path: Path, frame: np.ndarray, boxes: list[list[float]]) -> Path:
+    import cv2
+
+    height, width = frame.shape[:2]
+    cv2.imwrite(str(tmp_path / "wide.png"), cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
+    path = tmp_path / "wide.json"
+    path.write_text(json.dumps({
+        "images": [{"id": "w", "file_name": "wide.png", "width": width, "height": height}],
+        "annotations": [{"image_id": "w", "bbox": box} for box in boxes],
+    }))
+    return path
+
+
+def test_a_wide_circle_gets_the_camera_of_its_fitted_image_circle(tmp_path: Path) -> None:
+    """With assumed_lens="image-circle" a frame whose circle is wider than its shorter side gets that
+    circle's camera (principal point and focal from the circle), not the shorter side's."""
+    from tests.fisheye.circle_frames import CircleFrame, draw_circle_frame
+
+    spec = CircleFrame((656, 540), (330.0, 268.0), 322.0)
+    path = _cepdof_file(tmp_path, draw_circle_frame(spec), [[600.0, 270.0, 20.0, 50.0, 0.0]])
+    (short,) = read_dataset(path)
+    assert short.camera == assumed_camera(656, 540)
+    (fitted,) = read_dataset(path, assumed_lens="image-circle")
+    camera = fitted.camera
+    assert camera is not None and fitted.camera_assumed and camera.id == "assumed"
+    np.testing.assert_allclose(camera.principal_point, spec.center_px, atol=1.0)
+    assert camera.image_circle_radius_px() == pytest.approx(spec.radius_px, abs=1.0)
+    assert fitted.principal_point == camera.principal_point  # the boxes turn about the fitted centre
+    # The person near the rim lies beyond the shorter side's circle, inside the fitted one.
+    theta, _ = camera.pixels_to_angles(fitted.boxes_cxcywh[:, :2])
+    assert np.isfinite(theta).all()
+    assert np.isnan(short.camera.pixels_to_angles(short.boxes_cxcywh[:, :2])[0]).all()  # type: ignore[union-attr]
+
+
+def test_a_frame_without_a_circle_falls_back_to_the_shorter_side_and_says_so(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    path = _cepdof_file(tmp_path, np.zeros((480, 640, 3), np.uint8), [])
+    with caplog.at_level("WARNING", logger="detector.data.readers"):
+        (frame,) = read_dataset(path, assumed_lens="image-circle")
+    assert frame.camera == assumed_camera(640, 480)
+    assert "no image circle" in caplog.text and "shorter side" in caplog.text
+
+
+def test_an_unknown_assumed_lens_is_refused(tmp_path: Path) -> None:
+    path = _cepdof_file(tmp_path, np.zeros((64, 64, 3), np.uint8), [])
+    with pytest.raises(ValueError, match="assumed_lens"):
+        read_dataset(path, assumed_lens="guess")  # type: ignore[arg-type]
