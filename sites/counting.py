@@ -115,16 +115,6 @@ class SiteCounts:
         tally.crossed_in += sign > 0
         tally.crossed_out += sign < 0
 
-        for zone_id, zone in layout.zones.items():
-            was_inside = zone.contains_xy(before_m)
-            is_inside = zone.contains_xy(after_m)
-            for index in np.flatnonzero(was_inside & is_inside):
-                track = tracks[index]
-                elapsed = track.last_seen - float(before_t[index])
-                track.dwell_s[zone_id] = track.dwell_s.get(zone_id, 0.0) + max(elapsed, 0.0)
-            for index in np.flatnonzero(is_inside & ~was_inside):
-                tracks[index].dwell_s.setdefault(zone_id, 0.0)
-
     def copy(self) -> SiteCounts:
         return SiteCounts({k: LineTally(v.crossed_in, v.crossed_out) for k, v in self.lines.items()})
 
