@@ -39,7 +39,7 @@ from benchmarks.stats import overhead_pct
 from contract import ModelError, OnnxModel, SessionThreads
 from fisheye import FisheyeCamera, load_camera
 from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
-from service.cpu import cpu_budget
+from service.core.cpu import cpu_budget
 
 SECTION_CHOICES = ("in-process", "http", "grpc")
 

@@ -32,9 +32,9 @@ from benchmarks.frames import FrameSet
 from benchmarks.stats import Summary, overhead_pct, ratio, summarize
 from contract import InputMapping, RawOutputs, min_decoded_side, prepare_input
 from fisheye import FisheyeCamera
-from service.config import Settings
+from service.core.config import Settings
+from service.core.metrics import ServiceMetrics
 from service.frame_decode import decode_frame, read_header
-from service.metrics import ServiceMetrics
 from service.pipeline import Pipeline, localize
 from service.result import Detections
 from service.runner import build_runner

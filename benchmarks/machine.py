@@ -13,7 +13,7 @@ import numpy as np
 import onnxruntime as ort
 
 from contract import ModelInfo
-from service.cpu import affinity_cpus, cgroup_cpu_quota, cpu_budget
+from service.core.cpu import affinity_cpus, cgroup_cpu_quota, cpu_budget
 
 
 def cpu_model_name(cpuinfo: str | None = None) -> str:

@@ -27,7 +27,7 @@ def run(args: argparse.Namespace) -> int:
     from benchmarks.cli import bench_frames
     from benchmarks.inprocess import service_pipeline
     from fisheye import load_camera
-    from service.cpu import cpu_budget
+    from service.core.cpu import cpu_budget
 
     camera = load_camera(args.camera)
     frames = bench_frames(args, lambda message: print(f"[bench] {message}", file=sys.stderr))

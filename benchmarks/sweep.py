@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
     from benchmarks.inprocess import service_pipeline
     from benchmarks.machine import machine_info
     from fisheye import load_camera
-    from service.cpu import cpu_budget
+    from service.core.cpu import cpu_budget
 
     threads = args.threads or cpu_budget()
     camera = load_camera(args.camera)

@@ -47,7 +47,7 @@ cameras_table = Table(
     Column("record", Text, nullable=False),
     Column("revision", Integer, nullable=False),
 )
-# Zones and counting lines of sites (`sites.layout`), one JSON record each; service.site_store reads them.
+# Zones and counting lines of sites (`sites.layout`), one JSON record each; service.sites.store reads them.
 site_zones_table = Table(
     "site_zones", _metadata,
     Column("site", String(64), primary_key=True),

@@ -17,7 +17,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench": ("benchmarks.cli", "latency and throughput on realistic frames (in process, HTTP, gRPC)"),
     "calibrate": ("fisheye.calibrate_cli", "fit a camera's lens from ruler marks, or import OpenCV K/D"),
     "serve": ("service.serve_cli", "serve the model over REST and gRPC (default model, demo camera)"),
-    "gateway": ("service.gateway_cli", "stream a camera's frames to a server over gRPC, print the answers"),
+    "gateway": ("service.gateway.cli", "stream a camera's frames to a server over gRPC, print the answers"),
     "synth": ("detector.data.synth_cli", "render synthetic fisheye frames with exact ground truth"),
     "export": ("exporter.export", "turn a training checkpoint into a verified ONNX model (optional INT8)"),
     "train": ("detector.train", "train the person detector on annotated fisheye frames"),
@@ -25,7 +25,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 # A flag that sends a subcommand to another module: `fishloc eval --tracks` needs no torch.
-_VARIANTS: dict[tuple[str, str], str] = {("eval", "--tracks"): "service.track_eval_cli"}
+_VARIANTS: dict[tuple[str, str], str] = {("eval", "--tracks"): "evaluation.track_eval_cli"}
 
 # Modules that only the training extra installs.
 _TRAIN_ONLY = ("torch", "onnx", "onnxscript", "matplotlib", "scipy")

@@ -21,10 +21,10 @@ import cv2
 
 from contract import OnnxModel, SessionThreads
 from fisheye import FisheyeCamera
-from service.config import Settings
+from service.core.config import Settings
+from service.core.metrics import ServiceMetrics
 from service.frame_decode import FrameError
 from service.latest import LatestFrames
-from service.metrics import ServiceMetrics
 from service.pipeline import Pipeline, PipelineConfig
 from service.result import DetectionResult
 

@@ -13,9 +13,9 @@ from pydantic import ValidationError
 from contract import ModelError
 from fisheye import CalibrationError
 from models import DEFAULT_MODEL_PATH
-from service.config import Settings
-from service.logs import configure_logging
-from service.tls import TlsError
+from service.core.config import Settings
+from service.core.logs import configure_logging
+from service.core.tls import TlsError
 
 log = logging.getLogger("fishloc.serve")
 

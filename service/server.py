@@ -17,17 +17,17 @@ from collections.abc import Iterator
 import uvicorn
 
 from fisheye import load_cameras
-from service.app import create_app
 from service.cameras import CameraRegistry
-from service.config import Settings
-from service.dependencies import ServiceState
-from service.grpc_server import GrpcFrontEnd
-from service.http_protocol import head_deadline_protocol
-from service.metrics import ServiceMetrics
+from service.core.config import Settings
+from service.core.metrics import ServiceMetrics
+from service.core.tls import TlsFiles, tls_from_settings
+from service.grpc.server import GrpcFrontEnd
+from service.http.app import create_app
+from service.http.dependencies import ServiceState
+from service.http.protocol import head_deadline_protocol
 from service.runner import build_runner
-from service.site_hub import SiteHub
-from service.site_store import SiteStore
-from service.tls import TlsFiles, tls_from_settings
+from service.sites.hub import SiteHub
+from service.sites.store import SiteStore
 
 log = logging.getLogger(__name__)
 

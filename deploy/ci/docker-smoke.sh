@@ -76,7 +76,7 @@ fi
 
 uid=$("$DOCKER" exec "$NAME" id -u)
 [ "$uid" = 10001 ] || fail "the service runs as uid $uid, not 10001"
-threads=$("$DOCKER" exec "$NAME" python -c "from service.config import Settings; print(Settings().threads)")
+threads=$("$DOCKER" exec "$NAME" python -c "from service.core.config import Settings; print(Settings().threads)")
 [ "$threads" = 1 ] || fail "inference threads are $threads under a 1-CPU limit"
 echo "docker-smoke: runs as uid $uid on a read-only root; $threads inference thread under --cpus 1"
 libpq=$("$DOCKER" exec "$NAME" python -c "import psycopg; print(psycopg.pq.version())") \

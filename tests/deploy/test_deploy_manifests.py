@@ -15,7 +15,7 @@ import yaml
 
 from fisheye import camera_to_dict, load_camera
 from models import DEMO_CAMERA_PATH
-from service.config import Settings
+from service.core.config import Settings
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 K8S = DEPLOY / "k8s"

@@ -11,7 +11,7 @@ import pytest
 from fisheye import camera_from_dict, camera_to_dict, load_camera
 from models import DEMO_CAMERA_PATH
 from service.cameras import CameraRegistry
-from service.site_store import SiteNotFoundError, SiteStore
+from service.sites.store import SiteNotFoundError, SiteStore
 from sites import CountingLine, Zone
 
 

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from service.metrics import ServiceMetrics
+from service.core.metrics import ServiceMetrics
 from sites import CountingLine, SiteLayout, Zone
 
 DASHBOARD = Path(__file__).resolve().parents[2] / "deploy" / "grafana" / "fishloc-sites.json"

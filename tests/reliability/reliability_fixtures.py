@@ -11,7 +11,7 @@ from reliability_support import LiveServer, save_double_model, test_settings
 
 from fisheye import FisheyeCamera, load_camera
 from models import DEMO_CAMERA_PATH
-from service.config import Settings
+from service.core.config import Settings
 
 
 @pytest.fixture(scope="session")

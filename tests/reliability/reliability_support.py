@@ -40,7 +40,7 @@ from service_doubles import save_double_model  # noqa: E402
 from service_frames import encode, person_frame  # noqa: E402
 from service_live_server import LiveServer  # noqa: E402
 
-from service.config import Settings  # noqa: E402
+from service.core.config import Settings  # noqa: E402
 
 _LISTENING_RE = re.compile(r"REST listening on (https?)://[^:]+:(\d+)")
 

@@ -16,10 +16,10 @@ from reliability_cases import SCENARIO
 from reliability_samples import Samples
 from reliability_support import LiveServer, ServeProcess, self_signed, serve_args
 
-import service.dependencies
+import service.http.dependencies
 from fisheye import FisheyeCamera, camera_to_dict
-from service.config import Settings
-from service.tls import TlsError
+from service.core.config import Settings
+from service.core.tls import TlsError
 
 pytest_plugins = ["reliability_fixtures"]
 
@@ -47,7 +47,7 @@ def test_tokens_are_compared_with_compare_digest(settings_for: Callable[..., Set
         calls.append((given, expected))
         return compare_digest(given, expected)
 
-    monkeypatch.setattr(service.dependencies.hmac, "compare_digest", spy)
+    monkeypatch.setattr(service.http.dependencies.hmac, "compare_digest", spy)
     with LiveServer(settings_for(api_token=API_TOKEN, detect_token=DETECT_TOKEN)) as live:
         record = camera_to_dict(demo_camera) | {"id": "cam"}
         for wrong in ("a", API_TOKEN[:-1], API_TOKEN + "x", "x" * 4096):

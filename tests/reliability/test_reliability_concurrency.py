@@ -13,7 +13,7 @@ from reliability_samples import PERSON_FLOOR_XY_M, Samples
 from reliability_support import LiveServer
 
 from fisheye import FisheyeCamera, camera_to_dict
-from service.config import Settings
+from service.core.config import Settings
 
 pytest_plugins = ["reliability_fixtures"]
 

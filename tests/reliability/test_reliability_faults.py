@@ -15,7 +15,7 @@ from reliability_samples import Samples
 from reliability_support import LiveServer, ServeProcess, serve_args
 
 from fisheye import FisheyeCamera, camera_to_dict
-from service.config import Settings
+from service.core.config import Settings
 from service.pipeline import Pipeline
 
 pytest_plugins = ["reliability_fixtures"]

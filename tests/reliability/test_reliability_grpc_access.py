@@ -27,8 +27,8 @@ from reliability_support import LiveServer, self_signed
 from fisheye import FisheyeCamera
 from protos.fishloc.v1 import localizer_pb2 as pb
 from protos.fishloc.v1 import localizer_pb2_grpc as pb_grpc
-from service.config import Settings
-from service.grpc_convert import camera_to_message
+from service.core.config import Settings
+from service.grpc.convert import camera_to_message
 
 pytest_plugins = ["reliability_fixtures"]
 

@@ -12,7 +12,7 @@ from reliability_samples import Samples
 from reliability_support import LiveServer, raw_request
 
 from fisheye import FisheyeCamera
-from service.config import Settings
+from service.core.config import Settings
 
 pytest_plugins = ["reliability_fixtures"]
 

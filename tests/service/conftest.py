@@ -12,7 +12,7 @@ from service_live_server import LiveServer
 
 from fisheye import FisheyeCamera, load_camera
 from models import DEMO_CAMERA_PATH
-from service.config import Settings
+from service.core.config import Settings
 
 
 @pytest.fixture(scope="session")

@@ -9,8 +9,8 @@ from typing import Any
 
 import httpx
 
-from service.config import Settings
-from service.dependencies import ServiceState
+from service.core.config import Settings
+from service.http.dependencies import ServiceState
 from service.server import Service, build_state
 
 

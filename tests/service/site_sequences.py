@@ -13,7 +13,7 @@ from detector.data.sequence import SequenceConfig
 from detector.data.sequence_writer import write_sequence
 from detector.data.site_world import default_plan
 from models import DEFAULT_MODEL_PATH
-from service.config import Settings
+from service.core.config import Settings
 
 
 def render_sequence(folder: Path, steps: int, seed: int, size: int = 512) -> Path:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from service.cpu import affinity_cpus, cgroup_cpu_quota, cpu_budget, quota_from_cfs, quota_from_cpu_max
+from service.core.cpu import affinity_cpus, cgroup_cpu_quota, cpu_budget, quota_from_cfs, quota_from_cpu_max
 
 
 @pytest.mark.parametrize(("text", "expected"), [

@@ -22,7 +22,7 @@ from detector.yolox.polar import PolarDetectorConfig, init_from_pretrained
 from exporter.export import export_onnx
 from fisheye import FisheyeCamera, foot_points
 from models import ASSETS_DIR
-from service.config import Settings
+from service.core.config import Settings
 
 CONFIG = PolarDetectorConfig(input_size=64, polar_width=256, polar_overlap=32, foot=True)
 

@@ -15,11 +15,11 @@ from service_frames import encode, person_frame
 from service_live_server import LiveServer
 
 from fisheye import FisheyeCamera
-from service.config import Settings
+from service.core.config import Settings
+from service.core.metrics import ServiceMetrics
+from service.http.routes.viewer import ASSETS_DIR
 from service.latest import LatestFrames, LatestFramesConfig, sniff_media_type
-from service.metrics import ServiceMetrics
 from service.result import DetectionResult, Detections
-from service.routes.viewer import ASSETS_DIR
 from service.runner import build_runner
 
 JPEG = {"content-type": "image/jpeg"}

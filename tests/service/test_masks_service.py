@@ -18,8 +18,8 @@ from service_live_server import LiveServer
 from fisheye import FisheyeCamera, camera_to_dict
 from protos.fishloc.v1 import localizer_pb2 as pb
 from protos.fishloc.v1 import localizer_pb2_grpc as pb_grpc
-from service.config import Settings
-from service.grpc_convert import camera_to_message
+from service.core.config import Settings
+from service.grpc.convert import camera_to_message
 
 FRAME_WH = (1024, 1024)
 PERSON_XY_M = (1.5, 1.0)

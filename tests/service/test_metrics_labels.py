@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from service.metrics import MAX_CAMERA_LABELS, OTHER_CAMERAS, ServiceMetrics
+from service.core.metrics import MAX_CAMERA_LABELS, OTHER_CAMERAS, ServiceMetrics
 
 
 def test_camera_labels_are_bounded_and_stable() -> None:

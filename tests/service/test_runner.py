@@ -8,7 +8,7 @@ from collections.abc import Callable, Iterator
 import cv2
 import pytest
 
-from service.config import Settings
+from service.core.config import Settings
 from service.server import build_state
 
 

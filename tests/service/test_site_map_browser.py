@@ -16,9 +16,9 @@ from service_live_server import LiveServer
 from site_sequences import render_sequence, shipped_model_server
 from viewer_browser import chromium_driver, console_errors, save_screenshot, wait_for
 
-from service.config import Settings
-from service.sequence_data import Sequence, read_sequence
-from service.track_playback import ServerClient, install
+from evaluation.sequence_data import Sequence, read_sequence
+from evaluation.track_playback import ServerClient, install
+from service.core.config import Settings
 
 STEPS = 12
 

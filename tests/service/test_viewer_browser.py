@@ -23,7 +23,7 @@ from viewer_browser import chromium_driver, console_errors, save_screenshot, una
 
 from fisheye import FisheyeCamera, camera_to_dict
 from models import DEFAULT_MODEL_PATH
-from service.config import Settings
+from service.core.config import Settings
 
 JPEG = {"content-type": "image/jpeg"}
 SAMPLES_DIR = Path(__file__).resolve().parents[2] / "samples"

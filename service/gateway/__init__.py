@@ -1,0 +1,1 @@
+"""The reference camera gateway: frame sources and the StreamDetect client."""

@@ -1,0 +1,1 @@
+"""The gRPC front end: the Localizer servicer, StreamDetect's lanes and the message conversions."""

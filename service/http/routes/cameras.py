@@ -1,0 +1,82 @@
+"""The camera registry: list, read, create or replace, delete."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter, Path, Request, Response, status
+from starlette.concurrency import run_in_threadpool
+
+from fisheye import CalibrationError, FisheyeCamera, camera_to_dict
+from fisheye.camera import CAMERA_ID_PATTERN
+from service.core.errors import ApiError
+from service.http.dependencies import State, WriteAccess
+from service.http.request_body import BodyLimits, read_json_object
+from service.http.schemas import CameraList, error_responses
+
+router = APIRouter(tags=["cameras"])
+
+CameraId = Path(pattern=CAMERA_ID_PATTERN, description="camera id")
+_MAX_RECORD_BYTES = 64 * 1024
+
+
+def _record_schema() -> dict[str, Any]:
+    """The JSON schema of a PUT body: the camera record with `id` optional (the path gives it)."""
+    schema = FisheyeCamera.model_json_schema(ref_template="#/components/schemas/{model}")
+    schema.pop("$defs", None)  # SitePose is in the components already, by FisheyeCamera
+    schema["required"] = [name for name in schema.get("required", []) if name != "id"]
+    schema["title"] = "CameraRecord"
+    return schema
+
+
+def not_found(camera_id: str) -> ApiError:
+    return ApiError(404, "camera_not_found", f"no camera {camera_id!r} in the registry")
+
+
+@router.get("/v1/cameras", response_model=CameraList, response_model_exclude_none=True,
+            summary="Every camera of the registry")
+async def list_cameras(state: State) -> dict[str, list[dict[str, Any]]]:
+    cameras = await run_in_threadpool(state.registry.all)
+    return {"cameras": [camera_to_dict(camera) for camera in cameras]}
+
+
+@router.get("/v1/cameras/{camera_id}", response_model=FisheyeCamera, response_model_exclude_none=True,
+            responses=error_responses(404, 422), summary="One camera's calibration record")
+async def get_camera(state: State, camera_id: str = CameraId) -> dict[str, Any]:
+    camera = await run_in_threadpool(state.registry.get, camera_id)
+    if camera is None:
+        raise not_found(camera_id)
+    return camera_to_dict(camera)
+
+
+@router.put(
+    "/v1/cameras/{camera_id}", response_model=FisheyeCamera, response_model_exclude_none=True,
+    dependencies=[WriteAccess], responses={201: {"model": FisheyeCamera, "description": "created"},
+                                           **error_responses(400, 401, 413, 422)},
+    summary="Create or replace a camera (the next frame uses it)",
+    description="Body: the camera-file record of DESIGN.md as JSON; `id` may be left out and must "
+                "match the path when given. Answers 201 when the camera is new, 200 when replaced.",
+    openapi_extra={"requestBody": {"required": True, "content": {
+        "application/json": {"schema": _record_schema()}}}},
+)
+async def put_camera(request: Request, response: Response, state: State,
+                     camera_id: str = CameraId) -> dict[str, Any]:
+    limits = BodyLimits(_MAX_RECORD_BYTES, state.settings.body_timeout_s)
+    record = await read_json_object(request, limits, "a camera record", "invalid_camera")
+    try:
+        outcome = await run_in_threadpool(state.registry.put_record, camera_id, record)
+    except CalibrationError as error:
+        raise ApiError(422, "invalid_camera", str(error)) from None
+    await run_in_threadpool(state.sites.camera_changed, camera_id, outcome.camera)
+    response.status_code = status.HTTP_201_CREATED if outcome.created else status.HTTP_200_OK
+    return camera_to_dict(outcome.camera)
+
+
+@router.delete("/v1/cameras/{camera_id}", status_code=204, response_class=Response,
+               dependencies=[WriteAccess], responses=error_responses(401, 404, 422),
+               summary="Remove a camera")
+async def delete_camera(state: State, camera_id: str = CameraId) -> Response:
+    if not await run_in_threadpool(state.registry.delete, camera_id):
+        raise not_found(camera_id)
+    await run_in_threadpool(state.sites.camera_changed, camera_id, None)
+    return Response(status_code=204)

@@ -1,0 +1,24 @@
+"""Liveness and readiness."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+
+from service.core.errors import ApiError
+from service.http.dependencies import State
+from service.http.schemas import Status, error_responses
+
+router = APIRouter(tags=["health"])
+
+
+@router.get("/healthz", response_model=Status, summary="Live: the process answers")
+async def healthz() -> dict[str, str]:
+    return {"status": "ok"}
+
+
+@router.get("/readyz", response_model=Status, responses=error_responses(503),
+            summary="Ready: the model is loaded and warmed up")
+async def readyz(state: State) -> dict[str, str]:
+    if not state.runner.ready:
+        raise ApiError(503, "not_ready", "the model is warming up", headers={"Retry-After": "1"})
+    return {"status": "ready"}

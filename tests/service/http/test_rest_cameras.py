@@ -1,0 +1,101 @@
+"""The camera registry over REST: CRUD with and without the token, persistence across restarts."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import Any
+
+import httpx
+import pytest
+from service_live_server import LiveServer
+
+from fisheye import FisheyeCamera, camera_to_dict
+from service.core.config import Settings
+
+TOKEN = "s3cret-token-for-tests"
+
+
+def lobby(altitude_m: float = 3.0) -> dict[str, Any]:
+    return {"altitude_m": altitude_m, "image_size": [1200, 1200], "principal_point": [600.0, 600.0],
+            "focal_px": [380.0, 380.0], "kb": [1.0, -0.02]}
+
+
+def test_crud_without_a_token(live_server: LiveServer, demo_camera: FisheyeCamera) -> None:
+    url = f"{live_server.url}/v1/cameras"
+    listed = httpx.get(url).json()
+    assert listed == {"cameras": [camera_to_dict(demo_camera)]}
+    created = httpx.put(f"{url}/lobby", json=lobby())
+    assert created.status_code == 201 and created.json() == {"id": "lobby", **lobby()}
+    replaced = httpx.put(f"{url}/lobby", json=lobby(3.5))
+    assert replaced.status_code == 200 and replaced.json()["altitude_m"] == 3.5
+    assert httpx.get(f"{url}/lobby").json()["altitude_m"] == 3.5
+    assert [c["id"] for c in httpx.get(url).json()["cameras"]] == ["demo", "lobby"]
+    assert httpx.delete(f"{url}/lobby").status_code == 204
+    for response in (httpx.get(f"{url}/lobby"), httpx.delete(f"{url}/lobby")):
+        assert response.status_code == 404 and response.json()["error"]["code"] == "camera_not_found"
+
+
+@pytest.mark.parametrize(("body", "status", "code"), [
+    (b"{not json", 400, "bad_json"),
+    (b"[1, 2]", 422, "invalid_camera"),
+    (b'{"altitude_m": 3}', 422, "invalid_camera"),
+    (b'{"id": "other", "altitude_m": 3, "image_size": [10, 10], "principal_point": [5, 5], '
+     b'"focal_px": [3, 3], "kb": [1]}', 422, "invalid_camera"),
+    (b'{"altitude_m": 3, "image_size": [10, 10], "principal_point": [5, 5], "focal_px": [3, 3], '
+     b'"kb": [1.0, -0.5]}', 422, "invalid_camera"),
+    (b'{"altitude_m": 3, "image_size": [10, 10], "principal_point": [5, 5], "focal_px": [3, 3], '
+     b'"kb": [1], "colour": "red"}', 422, "invalid_camera"),
+])
+def test_invalid_records_are_refused(live_server: LiveServer, body: bytes, status: int, code: str) -> None:
+    response = httpx.put(f"{live_server.url}/v1/cameras/cam", content=body,
+                         headers={"content-type": "application/json"})
+    assert response.status_code == status and response.json()["error"]["code"] == code
+    assert httpx.get(f"{live_server.url}/v1/cameras/cam").status_code == 404
+
+
+def test_invalid_camera_id_in_the_path(live_server: LiveServer) -> None:
+    response = httpx.put(f"{live_server.url}/v1/cameras/bad%20id", json=lobby())
+    assert response.status_code == 422 and response.json()["error"]["code"] == "invalid_request"
+
+
+def test_writes_need_the_token(settings_for: Callable[..., Settings],
+                               caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.DEBUG)
+    with LiveServer(settings_for(api_token=TOKEN)) as live:
+        url = f"{live.url}/v1/cameras/lobby"
+        good = {"Authorization": f"Bearer {TOKEN}"}
+        for headers in ({}, {"Authorization": "Bearer wrong"}, {"Authorization": TOKEN},
+                        {"Authorization": f"Basic {TOKEN}"}):
+            attempts = (httpx.put(url, json=lobby(), headers=headers), httpx.delete(url, headers=headers))
+            for response in attempts:
+                assert response.status_code == 401, headers
+                assert response.json()["error"]["code"] == "unauthorized"
+                assert response.headers["www-authenticate"] == "Bearer"
+        assert httpx.get(url).status_code == 404  # nothing was written
+        assert httpx.put(url, json=lobby(), headers=good).status_code == 201
+        assert httpx.get(url).status_code == 200  # reads need no token
+        assert httpx.get(f"{live.url}/v1/cameras").status_code == 200
+        assert httpx.delete(url, headers=good).status_code == 204
+    assert caplog.records and not any(TOKEN in record.getMessage() or TOKEN in str(record.__dict__)
+                                      for record in caplog.records)
+
+
+def test_registry_survives_a_restart(settings_for: Callable[..., Settings]) -> None:
+    settings = settings_for()
+    with LiveServer(settings) as first:
+        assert httpx.put(f"{first.url}/v1/cameras/lobby", json=lobby(2.7)).status_code == 201
+        assert httpx.delete(f"{first.url}/v1/cameras/demo").status_code == 204
+    with LiveServer(settings) as second:  # same database file, new server
+        cameras = httpx.get(f"{second.url}/v1/cameras").json()["cameras"]
+        assert cameras == [{"id": "lobby", **lobby(2.7)}]  # and the deleted demo camera stays deleted
+
+
+def test_cameras_flag_seeds_the_registry(settings_for: Callable[..., Settings], tmp_path: Any) -> None:
+    folder = tmp_path / "cams"
+    folder.mkdir()
+    (folder / "a.json").write_text('{"id": "entrance", "altitude_m": 2.9, "image_size": [800, 800], '
+                                   '"principal_point": [400, 400], "focal_px": [250, 250], "kb": [1]}')
+    with LiveServer(settings_for(cameras=folder, demo_camera=False)) as live:
+        ids = [c["id"] for c in httpx.get(f"{live.url}/v1/cameras").json()["cameras"]]
+        assert ids == ["entrance"]
