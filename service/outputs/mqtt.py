@@ -149,6 +149,7 @@ class MqttSink(Sink):
         self._wake = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
         self.connected = False
+        self._client: Any = None
         self._error: str | None = None
 
     async def start(self) -> None:
@@ -206,6 +207,7 @@ class MqttSink(Sink):
                     identifier=config.client_id, will=will, keepalive=config.keepalive_s,
                     tls_context=config.tls_context(), timeout=10,
                 ) as client:
+                    self._client = client
                     await client.publish(self.topics.status, "online", qos=1, retain=True)
                     self.connected, self._error, wait = True, None, self.retry_s
                     self._dirty = dict.fromkeys(self._retained)  # a new session: send everything again
@@ -216,7 +218,7 @@ class MqttSink(Sink):
             except Exception as error:  # aiomqtt.MqttError, ssl and OS errors: retry with backoff
                 if self.connected or self._error is None:
                     log.warning("MQTT broker %s:%d unreachable: %s", config.host, config.port, error)
-                self.connected = False
+                self.connected, self._client = False, None
                 self._error = f"{type(error).__name__}: {error}"
                 self.metrics.failures.labels(self.name).inc()
                 await asyncio.sleep(wait)
@@ -245,9 +247,12 @@ class MqttSink(Sink):
             await asyncio.sleep(0.05)
 
     async def close(self) -> None:
-        if self.connected:
-            with contextlib.suppress(TimeoutError):
+        """Send what is waiting, then `offline` (a clean disconnection sends no last will)."""
+        if self.connected and self._client is not None:
+            with contextlib.suppress(Exception):
                 await asyncio.wait_for(self.flushed(), 2.0)
+                await asyncio.wait_for(self._client.publish(self.topics.status, "offline", qos=1,
+                                                            retain=True), 2.0)
         if self._task is not None:
             self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
