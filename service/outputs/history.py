@@ -123,7 +123,8 @@ class HistoryStore:
                     self._add(connection, site, step, start, kind, key, figure)
             if minute.start % PRUNE_EVERY_S == 0:
                 cut = minute.start - self.retention_s
-                connection.execute(delete(table).where((table.c.site == site) & (table.c.start < cut)))
+                gone = (table.c.site == site) & (table.c.start + table.c.step_s <= cut)  # whole buckets only
+                connection.execute(delete(table).where(gone))
 
     @staticmethod
     def _add(connection: Connection, site: str, step: int, start: int, kind: str, key: str,
