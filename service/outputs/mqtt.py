@@ -241,9 +241,14 @@ class MqttSink(Sink):
                 self._wake.clear()
                 await self._wake.wait()
 
+    @property
+    def pending(self) -> int:
+        """Retained topics and events not sent yet."""
+        return len(self._dirty) + self._events.qsize()
+
     async def flushed(self) -> None:
-        """Wait until everything published so far has gone to the broker (tests, shutdown)."""
-        while self._dirty or not self._events.empty():
+        """Wait until everything published so far has gone to the broker."""
+        while self.pending:
             await asyncio.sleep(0.05)
 
     async def close(self) -> None:

@@ -4,6 +4,7 @@ post's signature and refuses posts for its first seconds, and `fishloc serve` as
 
 from __future__ import annotations
 
+import getpass
 import hashlib
 import hmac
 import json
@@ -65,7 +66,9 @@ def mosquitto(folder: Path, extra_config: str = "", port: int | None = None) -> 
         skip_or_fail_in_ci("mosquitto is not installed (apt-get install mosquitto)")
     port = port or free_port()
     config = folder / f"mosquitto-{port}.conf"
-    config.write_text(f"listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n{extra_config}")
+    # `user`: a broker started as root stays this user, so it can read the test's own (0700) folders.
+    config.write_text(f"user {getpass.getuser()}\nlistener {port} 127.0.0.1\nallow_anonymous true\n"
+                      f"persistence false\n{extra_config}")
     process = subprocess.Popen([str(binary), "-c", str(config)], stdout=subprocess.DEVNULL,
                                stderr=subprocess.DEVNULL)
     try:
