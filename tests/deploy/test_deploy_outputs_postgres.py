@@ -3,10 +3,9 @@ into a registry made before them."""
 
 from __future__ import annotations
 
-from tests.service.outputs.output_tables_check import check_history, check_migration, check_outbox
-
 from service.outputs.history import HistoryStore
 from service.outputs.webhooks import WebhookStore
+from tests.service.outputs.output_tables_check import check_history, check_migration, check_outbox
 
 
 def test_outputs_tables_on_postgres(postgres_url: str) -> None:

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tests.service.outputs.output_tables_check import check_history, check_migration, check_outbox
-
 from service.outputs.history import Bucket, Figure, HistoryStore
 from service.outputs.webhooks import WebhookStore
+from tests.service.outputs.output_tables_check import check_history, check_migration, check_outbox
 
 
 def test_outputs_tables_on_sqlite(tmp_path: Path) -> None:
