@@ -49,6 +49,10 @@ class Figure:
         self.peak = max(self.peak, value)
         self.samples += 1
 
+    @property
+    def mean(self) -> float:
+        return round(self.total / self.samples, 3) if self.samples else 0.0
+
 
 @dataclass
 class Bucket:
@@ -80,16 +84,19 @@ class Bucket:
         mine.peak = mine.peak + other.peak if kind == "line" else max(mine.peak, other.peak)
 
     def to_row(self) -> dict[str, Any]:
-        people = self.figures.get(("people", ""), Figure())
-        return {
-            "time": self.start,
-            "people_mean": round(people.total / people.samples, 3) if people.samples else 0.0,
-            "people_max": int(people.peak),
-            "zones": {key: {"mean": round(f.total / f.samples, 3) if f.samples else 0.0, "max": int(f.peak)}
-                      for (kind, key), f in sorted(self.figures.items()) if kind == "zone"},
-            "lines": {key: {"in": int(f.total), "out": int(f.peak)}
-                      for (kind, key), f in sorted(self.figures.items()) if kind == "line"},
-        }
+        """The bucket as a row of the history answer (one pass: a year's rows are many)."""
+        zones: dict[str, dict[str, float | int]] = {}
+        lines: dict[str, dict[str, int]] = {}
+        row: dict[str, Any] = {"time": self.start, "people_mean": 0.0, "people_max": 0, "zones": zones,
+                               "lines": lines}
+        for (kind, key), figure in self.figures.items():
+            if kind == "line":
+                lines[key] = {"in": int(figure.total), "out": int(figure.peak)}
+            elif kind == "zone":
+                zones[key] = {"mean": figure.mean, "max": int(figure.peak)}
+            else:
+                row["people_mean"], row["people_max"] = figure.mean, int(figure.peak)
+        return row
 
 
 def resolution_for(step_s: int) -> int:
@@ -152,18 +159,22 @@ class HistoryStore:
                         func.max(table.c.peak), func.sum(table.c.peak), func.sum(table.c.samples))
                  .where((table.c.site == site) & (table.c.step_s == resolution) & (table.c.start >= lo)
                         & (table.c.start < to_s))
-                 .group_by(bucket, table.c.kind, table.c.key))
+                 .group_by(bucket, table.c.kind, table.c.key)
+                 .order_by(bucket, table.c.kind, table.c.key))
         with self.engine.connect() as connection:
             rows = connection.execute(query).all()
         buckets: dict[int, Bucket] = {}
         for start, kind, key, total, peak_max, peak_sum, samples in rows:
-            figure = Figure(float(total), float(peak_sum if kind == "line" else peak_max), int(samples))
-            buckets.setdefault(int(start), Bucket(int(start))).merge(kind, key, figure)
+            found = buckets.get(start)
+            if found is None:
+                found = buckets[start] = Bucket(int(start))
+            found.figures[kind, key] = Figure(float(total), float(peak_sum if kind == "line" else peak_max),
+                                              int(samples))
         if open_minute is not None and lo <= open_minute.start < to_s:
             start = open_minute.start - open_minute.start % step_s
             for (kind, key), figure in open_minute.figures.items():
                 buckets.setdefault(start, Bucket(start)).merge(kind, key, figure)
-        return [buckets[start].to_row() for start in sorted(buckets)]
+        return [buckets[start].to_row() for start in sorted(buckets)]  # sorted: the open minute may be new
 
 
 CSV_COLUMNS = ("time", "people_mean", "people_max")
