@@ -37,7 +37,8 @@ def _time(text: str | None, name: str, default: float) -> float:
                      "description": "rows of `step` seconds, oldest first (CSV with `Accept: text/csv`)"},
                **_errors(401, 404, 422)},
     summary="Counts history of a site: people (mean, max), zones (mean, max), line crossings per step",
-    description="JSON, or CSV with `Accept: text/csv` (or `format=csv`). `from` and `to`: Unix seconds or RFC 3339 (default: the last day); `step`: seconds, a "
+    description="JSON, or CSV with `Accept: text/csv` (or `format=csv`). `from` and `to`: Unix seconds "
+                "or RFC 3339 (default: the last day); `step`: seconds, a "
                 "multiple of 60 up to 31 days (default 60). Times are capture times; a row's line counts "
                 "are the crossings within it.",
 )
