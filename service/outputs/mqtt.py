@@ -26,7 +26,7 @@ from typing import Any
 from urllib.parse import unquote, urlsplit
 
 from service.outputs.events import SiteUpdate
-from service.outputs.sink import OutputMetrics, Sink
+from service.outputs.sink import OutputMetrics, Sink, cancel
 
 log = logging.getLogger(__name__)
 
@@ -258,11 +258,8 @@ class MqttSink(Sink):
                 await asyncio.wait_for(self.flushed(), 2.0)
                 await asyncio.wait_for(self._client.publish(self.topics.status, "offline", qos=1,
                                                             retain=True), 2.0)
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
-            self._task = None
+        await cancel(self._task)
+        self._task = None
 
     def health(self) -> dict[str, Any]:
         answer: dict[str, Any] = {"ok": self.connected, "connected": self.connected,

@@ -25,6 +25,14 @@ log = logging.getLogger(__name__)
 QUEUE_SIZE = 1024
 
 
+async def cancel(task: asyncio.Task[None] | None) -> None:
+    """Cancel a background task and wait for it to end."""
+    if task is not None:
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+
+
 class OutputMetrics:
     """Counters of the outputs, on the service's registry."""
 
@@ -113,10 +121,7 @@ class Dispatcher:
         with contextlib.suppress(Exception):
             await asyncio.wait_for(self.drain(), timeout=5.0)
         for task in self._tasks:
-            task.cancel()
-        for task in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+            await cancel(task)
         for sink in self.sinks:
             try:
                 await sink.close()

@@ -7,8 +7,6 @@ records the schema version in `registry_meta`, so a later version knows what it 
 
 from __future__ import annotations
 
-import time
-
 from sqlalchemy import (
     Column,
     Float,
@@ -23,9 +21,9 @@ from sqlalchemy import (
     update,
 )
 from sqlalchemy.engine import Engine
-from sqlalchemy.exc import IntegrityError, ProgrammingError
+from sqlalchemy.exc import IntegrityError
 
-from service.cameras import registry_meta
+from service.cameras import create_tables, registry_meta
 
 SCHEMA_KEY = "outputs_schema"
 SCHEMA_VERSION = "1"
@@ -74,24 +72,16 @@ history_table = Table(
 )
 
 
-def migrate(engine: Engine, attempts: int = 5) -> None:
-    """Create the outputs' tables where missing and record the schema version (replicas starting
-    together race; the losers look again and find the tables made)."""
-    for attempt in range(attempts):
-        try:
-            metadata.create_all(engine)
-            break
-        except (IntegrityError, ProgrammingError):
-            if attempt == attempts - 1:
-                raise
-            time.sleep(0.05 * (attempt + 1))
+def migrate(engine: Engine) -> None:
+    """Create the outputs' tables where missing and record the schema version."""
+    create_tables(engine, metadata)
     with engine.begin() as connection:
         key = registry_meta.c.key == SCHEMA_KEY
         if connection.execute(select(registry_meta.c.value).where(key)).first() is None:
             try:
                 with connection.begin_nested():
                     connection.execute(insert(registry_meta).values(key=SCHEMA_KEY, value=SCHEMA_VERSION))
-            except IntegrityError:
+            except IntegrityError:  # another replica recorded it at the same moment
                 pass
         else:
             connection.execute(update(registry_meta).where(key).values(value=SCHEMA_VERSION))

@@ -28,7 +28,7 @@ from sqlalchemy import delete, func, insert, select, update
 from sqlalchemy.engine import Engine
 
 from service.outputs.events import SiteUpdate, summary_event, threshold_crossings
-from service.outputs.sink import OutputMetrics, Sink
+from service.outputs.sink import OutputMetrics, Sink, cancel
 from service.outputs.tables import outbox_table as outbox
 from service.outputs.tables import webhooks_table as hooks
 from sites.layout import NAME_PATTERN
@@ -340,11 +340,8 @@ class WebhookSink(Sink):
         await asyncio.to_thread(self.store.failed, seq, status, error, self.config)
 
     async def close(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
-            self._task = None
+        await cancel(self._task)
+        self._task = None
 
     def health(self) -> dict[str, Any]:
         answer: dict[str, Any] = {"ok": not self._failing}
