@@ -94,6 +94,13 @@ class Service:
         settings = self.state.settings
         self.tls = tls_from_settings(settings)  # TlsError before anything listens
         await self.state.outputs.dispatcher.start()
+        try:
+            await self._serve(settings)
+        except BaseException:
+            await self.state.outputs.dispatcher.close()
+            raise
+
+    async def _serve(self, settings: Settings) -> None:
         if settings.grpc_port >= 0:
             self.grpc = GrpcFrontEnd(self.state, tls=self.tls)
             await self.grpc.start()
