@@ -2,9 +2,9 @@
 and each line's crossings in and out, in the registry's database.
 
 The sink adds each update to the open minute of its site (in memory) and writes a minute when the
-next one begins, or when the service stops; a minute is added at once to its hour and its day as
-well (`history` rows of step 3600 and 86400), so a query over a year at a day's step reads 365 rows,
-not half a million. All writes add (sums, sample counts, peaks), so a minute written in two parts
+next one begins, or when the service stops; a minute is added at once to its quarter hour, hour and
+day as well (`history` rows of step 900, 3600 and 86400), and a query reads the coarsest rows its
+step allows: a year at a day's step reads 365 rows per figure, not half a million. All writes add (sums, sample counts, peaks), so a minute written in two parts
 (a restart within it) is whole. A crash loses the open minute. Rows older than `retention_days`
 before a site's newest minute are deleted.
 """
@@ -25,7 +25,7 @@ from service.outputs.sink import Sink
 from service.outputs.tables import history_table as table
 
 MINUTE_S = 60
-RESOLUTIONS_S = (86_400, 3_600, MINUTE_S)  # stored steps, coarsest first
+RESOLUTIONS_S = (86_400, 3_600, 900, MINUTE_S)  # stored steps, coarsest first
 MAX_STEP_S = 31 * 86_400
 MAX_ROWS = 10_000
 PRUNE_EVERY_S = 3_600

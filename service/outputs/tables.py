@@ -55,7 +55,7 @@ outbox_table = Table(
     Index("ix_webhook_outbox_due", "delivered_at", "next_at"),
     Index("ix_webhook_outbox_hook", "site", "webhook", "seq"),
 )
-# Counts history: per site, resolution (60, 3600 or 86400 s) and bucket start, one row per figure:
+# Counts history: per site, resolution (60, 900, 3600 or 86400 s) and bucket start, one row per figure:
 # kind `people` (key ""), `zone` (key: zone id), `line` (key: line id). People and zones keep the sum
 # of their samples, the sample count and the peak; lines keep their crossings in (`total`) and out
 # (`peak`) within the bucket.
