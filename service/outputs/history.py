@@ -4,9 +4,10 @@ and each line's crossings in and out, in the registry's database.
 The sink adds each update to the open minute of its site (in memory) and writes a minute when the
 next one begins, or when the service stops; a minute is added at once to its quarter hour, hour and
 day as well (`history` rows of step 900, 3600 and 86400), and a query reads the coarsest rows its
-step allows: a year at a day's step reads 365 rows per figure, not half a million. All writes add (sums, sample counts, peaks), so a minute written in two parts
-(a restart within it) is whole. A crash loses the open minute. Rows older than `retention_days`
-before a site's newest minute are deleted.
+step allows: a year at a day's step reads 365 rows per figure, not half a million. All writes add
+(sums, sample counts, peaks), so a minute written in two parts (a restart within it) is whole. A
+crash loses the open minute. Rows older than `retention_days` before a site's newest minute are
+deleted.
 """
 
 from __future__ import annotations

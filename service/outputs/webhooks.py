@@ -6,7 +6,7 @@ its `zone_thresholds` from below, `up`, or falling under it, `down`) and `summar
 every `summary_every_s` of capture time). Each event is written to the `webhook_outbox` table of
 the registry's database before anything is sent; the delivery loop posts due rows, signed
 `X-FishLoc-Signature: sha256=<hex HMAC-SHA256 of the body with the secret>`, and retries errors and
-timeouts with a doubling backoff. A restart finds the rows still pending and sends them: delivery is
+timeouts with a doubling backoff, for at most a day. A restart finds the rows still pending and sends them: delivery is
 at least once, and a receiver dedupes by the body's `id`.
 """
 
@@ -113,6 +113,7 @@ class DeliveryConfig:
     poll_s: float = 0.5           # how often the outbox is looked at when idle
     batch: int = 64               # rows taken per look
     keep_delivered: int = 50      # delivered rows kept per webhook, as its delivery log
+    max_age_s: float = 86_400.0   # an event still undelivered this long after it happened is given up
 
 
 class WebhookStore:
@@ -197,15 +198,23 @@ class WebhookStore:
                     (outbox.c.site == site) & (outbox.c.webhook == webhook)
                     & outbox.c.delivered_at.is_not(None) & (outbox.c.seq <= old[0])))
 
-    def failed(self, seq: int, status: int | None, error: str, config: DeliveryConfig) -> None:
+    def failed(self, seq: int, status: int | None, error: str, config: DeliveryConfig) -> bool:
+        """Count a failed attempt and set the next one; False when the event is given up (deleted:
+        older than `max_age_s`), or gone with its webhook."""
         with self.engine.begin() as connection:
-            attempts = connection.execute(select(outbox.c.attempts).where(outbox.c.seq == seq)).scalar()
-            if attempts is None:  # the webhook was deleted meanwhile
-                return
+            row = connection.execute(
+                select(outbox.c.attempts, outbox.c.created_at).where(outbox.c.seq == seq)).first()
+            if row is None:  # the webhook was deleted meanwhile
+                return False
+            attempts, created_at = row
+            if time.time() - float(created_at) > config.max_age_s:
+                connection.execute(delete(outbox).where(outbox.c.seq == seq))
+                return False
             wait = min(config.first_backoff_s * 2 ** int(attempts), config.max_backoff_s)
             connection.execute(update(outbox).where(outbox.c.seq == seq).values(
                 attempts=outbox.c.attempts + 1, next_at=time.time() + wait, last_status=status,
                 last_error=error[:500]))
+        return True
 
     def drop(self, seq: int) -> None:
         with self.engine.begin() as connection:
@@ -337,7 +346,8 @@ class WebhookSink(Sink):
         self.metrics.failures.labels(self.name).inc()
         self._failing.add(name)
         self._last_error = f"{name}: {error}"
-        await asyncio.to_thread(self.store.failed, seq, status, error, self.config)
+        if not await asyncio.to_thread(self.store.failed, seq, status, error, self.config):
+            self.metrics.dropped.labels(self.name).inc()
 
     async def close(self) -> None:
         await cancel(self._task)

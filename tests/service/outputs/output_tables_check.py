@@ -60,7 +60,9 @@ def check_outbox(store: WebhookStore) -> None:
     assert [row[0] for row in claimed] == sorted(row[0] for row in claimed) and len(claimed) == 3
     assert store.claim_due(10, lease_s=60) == []  # leased: another deliverer skips them
     store.delivered(claimed[0][0], 200, keep=50)
-    store.failed(claimed[1][0], 503, "HTTP 503", DeliveryConfig())
+    assert store.failed(claimed[1][0], 503, "HTTP 503", DeliveryConfig())
     log = store.log("hall", "hook")
     assert log["pending"] == 2 and [d["id"] for d in log["failures"]] == ["e1"]
+    assert not store.failed(claimed[2][0], None, "ConnectError", DeliveryConfig(max_age_s=-1.0))  # given up
+    assert store.log("hall", "hook")["pending"] == 1
     assert store.delete("hall", "hook") and store.log("hall", "hook")["deliveries"] == []
