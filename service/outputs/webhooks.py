@@ -6,8 +6,8 @@ its `zone_thresholds` from below, `up`, or falling under it, `down`) and `summar
 every `summary_every_s` of capture time). Each event is written to the `webhook_outbox` table of
 the registry's database before anything is sent; the delivery loop posts due rows, signed
 `X-FishLoc-Signature: sha256=<hex HMAC-SHA256 of the body with the secret>`, and retries errors and
-timeouts with a doubling backoff, for at most a day. A restart finds the rows still pending and sends them: delivery is
-at least once, and a receiver dedupes by the body's `id`.
+timeouts with a doubling backoff, for at most a day. A restart finds the rows still pending and
+sends them: delivery is at least once, and a receiver dedupes by the body's `id`.
 """
 
 from __future__ import annotations
