@@ -99,13 +99,13 @@ def _engine(url: str) -> Engine:
     return engine
 
 
-def _create_tables(engine: Engine, attempts: int = 5) -> None:
-    """Create the registry's tables unless they exist. Replicas starting together on a new database
-    race to create them; the losers (IntegrityError or ProgrammingError on PostgreSQL) look again
-    and find them made."""
+def create_tables(engine: Engine, metadata: MetaData = _metadata, attempts: int = 5) -> None:
+    """Create the registry's tables (or those of `metadata`) unless they exist. Replicas starting
+    together on a new database race to create them; the losers (IntegrityError or ProgrammingError
+    on PostgreSQL) look again and find them made."""
     for attempt in range(attempts):
         try:
-            _metadata.create_all(engine)
+            metadata.create_all(engine)
             return
         except (IntegrityError, ProgrammingError):
             if attempt == attempts - 1:
@@ -127,7 +127,7 @@ class CameraRegistry:
     def __init__(self, url_or_path: str | Path) -> None:
         self.url = database_url(url_or_path)
         self.engine = _engine(self.url)
-        _create_tables(self.engine)
+        create_tables(self.engine)
         self._cache: dict[str, tuple[str, FisheyeCamera]] = {}
         self._cache_lock = threading.Lock()
 

@@ -36,6 +36,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="camera registry: SQLite file or SQLAlchemy URL "
                              "(default ~/.local/share/fishloc/cameras.db)")
     parser.add_argument("--threads", type=int, help="inference threads (default: the container's CPU quota)")
+    parser.add_argument("--mqtt", metavar="URL",
+                        help="publish occupancy to an MQTT broker: mqtt://[user:pass@]HOST[:PORT] or "
+                             "mqtts://... (with Home Assistant discovery)")
+    parser.add_argument("--mqtt-prefix", help="MQTT topic prefix (default fishloc)")
+    parser.add_argument("--history-retention-days", type=float,
+                        help="days of counts history kept per site (default 400)")
     parser.add_argument("--no-demo-camera", dest="demo_camera", action="store_const", const=False,
                         help="do not add the demo camera to a new database")
     parser.add_argument("--max-view-pixels", type=int, metavar="PIXELS",
@@ -46,7 +52,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def settings_from_args(args: argparse.Namespace) -> Settings:
     """Settings from the environment with the flags that were given on top."""
     names = ("host", "http_port", "grpc_port", "model", "cameras", "database", "threads", "demo_camera",
-             "max_view_pixels")
+             "max_view_pixels", "mqtt", "mqtt_prefix", "history_retention_days")
     overrides = {name: getattr(args, name) for name in names if getattr(args, name, None) is not None}
     return Settings(**overrides)
 

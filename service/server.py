@@ -25,6 +25,7 @@ from service.grpc.server import GrpcFrontEnd
 from service.http.app import create_app
 from service.http.dependencies import ServiceState
 from service.http.protocol import head_deadline_protocol
+from service.outputs.build import build_outputs
 from service.runner import build_runner
 from service.sites.hub import SiteHub
 from service.sites.store import SiteStore
@@ -58,10 +59,11 @@ def build_state(settings: Settings) -> ServiceState:
         runner.close()
         raise
     site_store = SiteStore(registry)
-    sites = SiteHub(site_store, metrics)
+    outputs = build_outputs(settings, registry.engine, metrics)
+    sites = SiteHub(site_store, metrics, updates=outputs.dispatcher.offer)
     runner.site_tracking = sites.track
     return ServiceState(settings=settings, runner=runner, registry=registry, metrics=metrics,
-                        site_store=site_store, sites=sites)
+                        site_store=site_store, sites=sites, outputs=outputs)
 
 
 class Service:
@@ -91,6 +93,14 @@ class Service:
     async def start(self) -> None:
         settings = self.state.settings
         self.tls = tls_from_settings(settings)  # TlsError before anything listens
+        await self.state.outputs.dispatcher.start()
+        try:
+            await self._serve(settings)
+        except BaseException:
+            await self.state.outputs.dispatcher.close()
+            raise
+
+    async def _serve(self, settings: Settings) -> None:
         if settings.grpc_port >= 0:
             self.grpc = GrpcFrontEnd(self.state, tls=self.tls)
             await self.grpc.start()
@@ -135,6 +145,7 @@ class Service:
             self._http.should_exit = True
         stopping = [self.wait()] if self.grpc is None else [self.grpc.stop(), self.wait()]
         await asyncio.gather(*stopping)
+        await self.state.outputs.dispatcher.close()  # after the last frame: its update is written
         self.state.runner.close()
         self.state.registry.close()
 

@@ -5,6 +5,10 @@ that crosses a counting line counts `in` or `out` (the sign convention of `sites
 time between two updates inside a zone adds to the track's dwell there. A tentative track's crossings
 wait on it (`Track.pending_crossings`) and count when it is confirmed: a person who walks through a
 door before the tracker is sure of them is counted once confirmed, noise that never is, never.
+
+Crossings have hysteresis in space and time: a track counts once it stands `margin_m` clear on the
+other side of a line and is still clear on that side `hold_s` later (or ends there), so a person who
+lingers on a door line, their position jittering across it, counts once or not at all.
 """
 
 from __future__ import annotations
@@ -50,19 +54,14 @@ class SiteCounts:
         track.pending_crossings = []
 
     def account(self, layout: SiteLayout, tracks: list[Track], before_m: FloatArray,
-                before_t: FloatArray, margin_m: float) -> None:
+                before_t: FloatArray, margin_m: float, hold_s: float = 0.0) -> None:
         """Count the moves of `tracks` (just updated; a tentative one's crossings wait on it) from
         `before_m` (M, 2) m at `before_t` (M,) s to their current positions: crossings per line, dwell
-        per zone.
-
-        A line counts a track when it is found on the other side, at least `margin_m` from the line,
-        of where it last stood that far out, and the way between crosses the segment: a person
-        standing on a door line, whose position jitters across it, counts once or not at all."""
+        per zone (the hysteresis of the module docstring: `margin_m` clear, for `hold_s`)."""
         if not tracks:
             return
         after_m = np.stack([track.last_position_m for track in tracks])
         for line_id, line in layout.lines.items():
-            tally = self.lines.setdefault(line_id, LineTally())
             length = float(np.hypot(*(line.to_m - line.from_m)))
             distance = side_of(line.from_m, line.to_m, after_m) / length
             distance_before = side_of(line.from_m, line.to_m, before_m) / length
@@ -74,17 +73,14 @@ class SiteCounts:
                                                            before_m[index])
             for index in np.flatnonzero(np.abs(distance) >= margin_m):
                 track, side = tracks[index], int(np.sign(distance[index]))
-                anchor = track.line_anchors.get(line_id, (side, after_m[index]))
-                track.line_anchors[line_id] = (side, after_m[index])
-                if anchor[0] == side:
+                anchor = track.line_anchors.setdefault(line_id, (side, after_m[index]))
+                if anchor[0] == side:  # still (or back) on its side: an excursion that did not hold
+                    track.line_anchors[line_id] = (side, after_m[index])
+                    track.line_leaving.pop(line_id, None)
                     continue
-                sign = int(line.crossings(anchor[1][None, :], after_m[index][None, :])[0])
-                if not track.confirmed:
-                    if sign:
-                        track.pending_crossings.append((line_id, sign))
-                    continue
-                tally.crossed_in += sign > 0
-                tally.crossed_out += sign < 0
+                since = track.line_leaving.setdefault(line_id, track.last_seen)
+                if track.last_seen - since >= hold_s:
+                    self._cross(layout, track, line_id, side, after_m[index])
         for zone_id, zone in layout.zones.items():
             was_inside = zone.contains_xy(before_m)
             is_inside = zone.contains_xy(after_m)
@@ -94,6 +90,30 @@ class SiteCounts:
                 track.dwell_s[zone_id] = track.dwell_s.get(zone_id, 0.0) + max(elapsed, 0.0)
             for index in np.flatnonzero(is_inside & ~was_inside):
                 tracks[index].dwell_s.setdefault(zone_id, 0.0)
+
+    def settle(self, layout: SiteLayout, track: Track) -> None:
+        """A confirmed track ends: the crossings it was holding (clear on the other side) count."""
+        for line_id in list(track.line_leaving):
+            anchor = track.line_anchors.get(line_id)
+            if anchor is not None and line_id in layout.lines:
+                self._cross(layout, track, line_id, -anchor[0], track.last_position_m)
+        track.line_leaving = {}
+
+    def _cross(self, layout: SiteLayout, track: Track, line_id: str, side: int, at_m: FloatArray) -> None:
+        """The track, clear on `side` of the line at `at_m`, has crossed it (if the way from its anchor
+        meets the segment): counted now, or pending while the track is tentative."""
+        anchor_m = track.line_anchors[line_id][1]
+        track.line_anchors[line_id] = (side, at_m)
+        track.line_leaving.pop(line_id, None)
+        sign = int(layout.lines[line_id].crossings(anchor_m[None, :], at_m[None, :])[0])
+        if not sign:
+            return
+        if not track.confirmed:
+            track.pending_crossings.append((line_id, sign))
+            return
+        tally = self.lines.setdefault(line_id, LineTally())
+        tally.crossed_in += sign > 0
+        tally.crossed_out += sign < 0
 
     def copy(self) -> SiteCounts:
         return SiteCounts({k: LineTally(v.crossed_in, v.crossed_out) for k, v in self.lines.items()})

@@ -49,7 +49,8 @@ class TrackerConfig:
     gate_chi2: float = 13.8           # Mahalanobis² gate (99.9 % of a 2-D Gaussian)
     max_gate_m: float = 2.5           # and never farther than this
     merge_radius_m: float = 0.5       # an unmatched person this near a track another camera fed now is it
-    line_margin_m: float = 0.2        # a line counts a track once it stands this far on the other side
+    line_margin_m: float = 0.2        # a line counts a track once it stands this far on the other side...
+    line_hold_s: float = 0.3          # ...and is still there this much later (or ends there)
     seen_window_s: float = 0.5        # cameras that saw a track this recently are "its" cameras
     max_buffered_frames: int = 4096   # bound on the frames kept for replay within the window
     high_score: float = 0.8           # a detection this confident may start a track and update any...
@@ -69,8 +70,9 @@ class TrackerConfig:
             raise ValueError(f"TrackerConfig values must be positive: {bad or 'window, slope, radius'}")
         if not 0 <= self.low_score <= self.high_score <= 1:
             raise ValueError("TrackerConfig needs 0 <= low_score <= high_score <= 1")
-        if self.floor_merge_base_m < 0 or self.floor_merge_per_m < 0 or self.report_coast_s < 0:
-            raise ValueError("TrackerConfig floor merge radii and report_coast_s must be >= 0")
+        if (self.floor_merge_base_m < 0 or self.floor_merge_per_m < 0 or self.report_coast_s < 0
+                or self.line_hold_s < 0):
+            raise ValueError("TrackerConfig floor merge radii, report_coast_s and line_hold_s must be >= 0")
 
     def noise_m2(self, distance_m: FloatArray) -> FloatArray:
         """(N,) position variances (m²) of detections at `distance_m` (N,) from their camera's nadir."""
@@ -111,6 +113,7 @@ class FusionState:
             if t - track.last_seen <= limit:
                 kept.append(track)
             elif track.confirmed:
+                self.counts.settle(self.layout, track)
                 self.ended += 1
         self.tracks = kept
 
@@ -170,7 +173,7 @@ class FusionState:
             joined[rows[di]] = track
             taken.add(di)
         self.counts.account(self.layout, moved, np.array(before_m).reshape(-1, 2), np.array(before_t),
-                            config.line_margin_m)
+                            config.line_margin_m, config.line_hold_s)
         for di in np.flatnonzero(high).tolist():
             if di in taken or self._seen_by_another(z_m[di], t, observation.camera_id):
                 continue
@@ -224,6 +227,8 @@ class FusionState:
         kept, ended = [], 0
         for track in self.tracks:
             if track.cameras_now(self.config.seen_window_s) == [camera_id]:
+                if track.confirmed:
+                    self.counts.settle(self.layout, track)
                 ended += track.confirmed
                 continue
             track.cameras_seen.pop(camera_id, None)

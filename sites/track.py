@@ -84,6 +84,8 @@ class Track:
     dwell_s: dict[str, float] = field(default_factory=dict)
     # Per counting line: the side (+1 left, -1 right) and position where the track last stood clear of it.
     line_anchors: dict[str, tuple[int, FloatArray]] = field(default_factory=dict)
+    # Per counting line: since when (capture time) the track stands clear on the other side of its anchor.
+    line_leaving: dict[str, float] = field(default_factory=dict)
     # Crossings (line id, +1 in / -1 out) made while tentative, counted when the track is confirmed.
     pending_crossings: list[tuple[str, int]] = field(default_factory=list)
     history: deque[tuple[float, float, float]] = field(default_factory=lambda: deque(maxlen=HISTORY_LENGTH))
@@ -140,6 +142,7 @@ class Track:
         twin.cameras_seen = dict(self.cameras_seen)
         twin.dwell_s = dict(self.dwell_s)
         twin.line_anchors = dict(self.line_anchors)
+        twin.line_leaving = dict(self.line_leaving)
         twin.pending_crossings = list(self.pending_crossings)
         twin.history = self.history.copy()
         return twin

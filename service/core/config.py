@@ -71,6 +71,18 @@ class Settings(BaseSettings):
     nms_iou: float | None = Field(None, gt=0, le=1,
                                   description="rotated NMS IoU threshold (default: the model's own)")
     grpc_max_message_bytes: int = Field(32 * 1024 * 1024, ge=1024)
+    mqtt: SecretStr | None = Field(
+        None, description="MQTT broker to publish occupancy to: mqtt://[user:pass@]HOST[:PORT] or mqtts://...")
+    mqtt_prefix: str = Field("fishloc", pattern=r"^[A-Za-z0-9_./-]{1,64}$", description="MQTT topic prefix")
+    mqtt_discovery_prefix: str = Field("homeassistant", pattern=r"^[A-Za-z0-9_./-]{1,64}$",
+                                       description="Home Assistant discovery prefix")
+    mqtt_ca: Path | None = Field(None, description="CA file of an mqtts:// broker (default: the system's)")
+    mqtt_cert: Path | None = Field(None, description="client certificate (PEM) for an mqtts:// broker")
+    mqtt_key: Path | None = Field(None, description="private key (PEM) of mqtt_cert")
+    mqtt_client_id: str = Field("fishloc", min_length=1, max_length=64, description="MQTT client id")
+    history_retention_days: float = Field(400.0, gt=0, description="days of counts history kept per site")
+    webhook_timeout_s: float = Field(5.0, gt=0, description="a webhook receiver slower than this has failed")
+    webhook_max_backoff_s: float = Field(60.0, gt=0, description="longest wait between a webhook's retries")
     log_level: str = Field("info", description="debug, info, warning, error")
     log_json: bool = Field(True, description="JSON log lines (false: plain text)")
 
@@ -86,6 +98,16 @@ class Settings(BaseSettings):
         if (self.tls_cert is None) != (self.tls_key is None):
             raise ValueError("tls_cert and tls_key go together: set both (FISHLOC_TLS_CERT, FISHLOC_TLS_KEY)")
         return self
+
+    @field_validator("mqtt")
+    @classmethod
+    def _mqtt_url(cls, value: SecretStr | None) -> SecretStr | None:
+        if value is None or not value.get_secret_value():
+            return None
+        from service.outputs.mqtt import MqttConfig
+
+        MqttConfig.from_url(value.get_secret_value())  # MqttUrlError (a ValueError) names what is wrong
+        return value
 
     @field_validator("api_token", "detect_token", "read_token")
     @classmethod

@@ -19,12 +19,14 @@ from service.http.routes import (
     detect,
     docs,
     health,
+    history,
     latest,
     metrics,
     model,
     site_poses,
     sites,
     viewer,
+    webhooks,
 )
 
 log = logging.getLogger(__name__)
@@ -52,8 +54,8 @@ def create_app(state: ServiceState, warm_up: bool = True) -> FastAPI:
     )
     app.state.fishloc = state
     install_error_handlers(app)
-    for module in (health, model, cameras, calibrations, detect, latest, sites, site_poses, metrics, viewer,
-                   docs):
+    for module in (health, model, cameras, calibrations, detect, latest, sites, site_poses, history, webhooks,
+                   metrics, viewer, docs):
         app.include_router(module.router)
     if state.settings.cors_origins:  # CORS stays off (no CORS headers at all) unless configured
         app.add_middleware(

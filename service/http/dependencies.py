@@ -13,6 +13,7 @@ from service.cameras import CameraRegistry
 from service.core.config import Settings
 from service.core.errors import ApiError
 from service.core.metrics import ServiceMetrics
+from service.outputs.build import Outputs
 from service.runner import InferenceRunner
 from service.sites.hub import SiteHub
 from service.sites.store import SiteStore
@@ -28,6 +29,7 @@ class ServiceState:
     metrics: ServiceMetrics
     site_store: SiteStore
     sites: SiteHub
+    outputs: Outputs
 
 
 def get_state(request: Request) -> ServiceState:

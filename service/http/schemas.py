@@ -156,6 +156,11 @@ class Status(BaseModel):
     status: str
 
 
+class Readiness(Status):
+    outputs: dict[str, dict[str, Any]] = Field(
+        default_factory=dict, description="per output: `ok` and what is wrong (e.g. the broker's error)")
+
+
 def error_responses(*statuses: int) -> dict[int | str, dict[str, object]]:
     """OpenAPI `responses` entries for error statuses, all in the error shape."""
     descriptions = {

@@ -8,6 +8,8 @@ that drop their oldest update when full: a slow client loses updates, it never s
 
 A camera that moves to another site, or is deleted, leaves its old site: the tracks only it saw end
 (`SiteTracker.remove_camera`), and a site that no camera names any more closes its watchers' streams.
+Every occupancy update is also handed to `updates` (the outputs' dispatcher, `service.outputs`), under
+the site's lock so a site's updates keep their order; it must return at once.
 Zones and lines are read from the registry's database when a site's tracker starts, when they are
 written through this process, and at most `layout_refresh_s` after a write through another process.
 """
@@ -21,7 +23,7 @@ import json
 import logging
 import threading
 import time
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from typing import Any
 
 from fisheye import FisheyeCamera
@@ -33,6 +35,7 @@ from sites import SiteLayout, SiteObservation, SiteTracker, TrackerConfig
 log = logging.getLogger(__name__)
 
 Occupancy = dict[str, Any]
+UpdateFeed = Callable[[str, Occupancy, SiteLayout], None]
 WATCH_QUEUE_SIZE = 16
 
 
@@ -80,8 +83,9 @@ class SiteHub:
     """Trackers and watchers of every site this process has seen."""
 
     def __init__(self, store: SiteStore, metrics: ServiceMetrics, config: TrackerConfig | None = None,
-                 layout_refresh_s: float = 1.0) -> None:
+                 layout_refresh_s: float = 1.0, updates: UpdateFeed | None = None) -> None:
         self.store = store
+        self.updates = updates
         self.metrics = metrics
         self.config = config or TrackerConfig()
         self.layout_refresh_s = layout_refresh_s
@@ -112,6 +116,8 @@ class SiteHub:
             occupancy = site.tracker.occupancy() if outcome.use != "dropped_late" else site.last
             site.last = occupancy
             watchers = list(site.watchers)
+            if self.updates is not None and occupancy is not None and outcome.use != "dropped_late":
+                self.updates(site_id, occupancy, site.tracker.layout)
             self.metrics.observe_site(site_id, outcome.use, before, site.tracker.line_totals(), occupancy,
                                       time.perf_counter() - started)
         if outcome.use != "dropped_late":
@@ -219,6 +225,8 @@ class SiteHub:
             left.cameras.discard(camera_id)
             left.last = left.tracker.occupancy()
             watchers = list(left.watchers)
+            if self.updates is not None:
+                self.updates(old, left.last, left.tracker.layout)
         log.info("camera %s left site %s: %d tracks ended", camera_id, old, ended,
                  extra={"camera_id": camera_id})
         if old not in self.store.site_cameras():

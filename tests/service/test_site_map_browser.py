@@ -48,6 +48,19 @@ return {
 """
 
 
+HISTORY_STATE_JS = """
+const chart = document.getElementById('history-chart');
+return {
+  state: chart.dataset.state || null, rows: Number(chart.dataset.rows || -1),
+  crossings: Number(chart.dataset.crossings || -1), peopleMax: Number(chart.dataset.peopleMax || -1),
+  bars: chart.querySelectorAll('rect.crossings').length,
+  meanPoints: (chart.querySelector('polyline.people-mean')?.getAttribute('points') || '').trim().split(' ')
+    .filter(Boolean).length,
+  csv: document.getElementById('history-csv').getAttribute('href'),
+};
+"""
+
+
 @pytest.fixture(scope="module")
 def driver() -> Iterator[Any]:
     with chromium_driver() as chromium:
@@ -108,6 +121,19 @@ def test_the_map_follows_the_site_live(driver: Any, server: LiveServer, sequence
     assert {t["track"] for t in state["trails"]} <= set(people)
     assert max(t["points"] for t in state["trails"]) > 2
     assert state["live"] == "on"
+    # The history chart: the site's minutes (the open one from memory), its crossings the line totals.
+    history = httpx.get(f"{server.url}/v1/sites/{sequence.site_id}/history", params={
+        "from": str(occupancy["time"] - 3600), "to": str(occupancy["time"] + 60)}).json()["rows"]
+    driver.execute_script("document.getElementById('history-refresh').click()")
+    chart = wait_for(lambda: (c := driver.execute_script(HISTORY_STATE_JS))["state"] == "drawn"
+                     and c["rows"] == len(history) and c["crossings"] == sum(
+                         t["in"] + t["out"] for t in occupancy["lines"].values()) and c,
+                     "the history chart to hold the sequence")
+    assert history and chart["bars"] == len(history) and chart["meanPoints"] == len(history)
+    assert chart["peopleMax"] == max(row["people_max"] for row in history)
+    assert chart["csv"].endswith("format=csv")
+    csv_text = httpx.get(f"{server.url}{chart['csv']}").text
+    assert csv_text.startswith("time,people_mean,people_max")
     save_screenshot(driver, "site_map.png", capsys)
     # Framing the cameras' whole views widens the map to hold each view's outline.
     narrow = driver.execute_script("return JSON.parse(document.getElementById('live-map').dataset.bounds)")

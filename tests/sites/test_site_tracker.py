@@ -124,6 +124,37 @@ def test_a_person_standing_on_a_line_is_not_counted_again_and_again() -> None:
     assert tracker.occupancy()["lines"] == {"door": {"in": 0, "out": 0}}
 
 
+def _lingering_tallies(config: TrackerConfig) -> dict[str, int]:
+    """A person who walks onto the door line, lingers on it for 10 s (their positions jittering
+    0.15 m either side of it), then walks on through: one crossing."""
+    layout = SiteLayout.of(lines=[CountingLine("door", np.array([0.0, -3.0]), np.array([0.0, 3.0]))])
+    tracker = SiteTracker("hall", config, layout)
+    xs = [-1.0 + 0.1 * k for k in range(10)]
+    xs += list(np.random.default_rng(1).normal(0.0, 0.15, 100))
+    xs += [0.1 * k for k in range(25)]
+    for k, x in enumerate(xs):
+        tracker.update(SiteObservation.of("cam-a", START + k * 0.1, [[x, 0.5]]))
+    return dict(tracker.occupancy()["lines"]["door"])
+
+
+def test_a_person_lingering_on_a_line_counts_once() -> None:
+    assert _lingering_tallies(TrackerConfig()) == {"in": 1, "out": 0}
+    # Without the hold in time, the same walk counts every sway.
+    swaying = _lingering_tallies(TrackerConfig(line_hold_s=0.0))
+    assert swaying["in"] > 1 and swaying["out"] > 0
+
+
+def test_a_track_ending_just_past_a_line_counts_its_crossing() -> None:
+    layout = SiteLayout.of(lines=[CountingLine("door", np.array([0.0, -3.0]), np.array([0.0, 3.0]))])
+    tracker = SiteTracker("hall", TrackerConfig(line_hold_s=1.0), layout)
+    for k in range(8):  # walks from -1.0 to 0.4 m, then is seen no more
+        tracker.update(SiteObservation.of("cam-a", START + k * 0.2, [[-1.0 + 0.2 * k, 0.5]]))
+    assert tracker.occupancy()["lines"]["door"] == {"in": 0, "out": 0}  # held, not yet counted
+    tracker.update(SiteObservation.of("cam-a", START + 5.0, np.zeros((0, 2))))
+    assert tracker.tracks == []
+    assert tracker.occupancy()["lines"]["door"] == {"in": 1, "out": 0}
+
+
 def test_zone_counts_and_dwell_per_track() -> None:
     square = Zone("entrance", np.array([[-4.0, -1.0], [-2.0, -1.0], [-2.0, 1.0], [-4.0, 1.0]]))
     tracker = SiteTracker("hall", layout=SiteLayout.of(zones=[square]))

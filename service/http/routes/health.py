@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from fastapi import APIRouter
 
 from service.core.errors import ApiError
 from service.http.dependencies import State
-from service.http.schemas import Status, error_responses
+from service.http.schemas import Readiness, Status, error_responses
 
 router = APIRouter(tags=["health"])
 
@@ -16,9 +18,11 @@ async def healthz() -> dict[str, str]:
     return {"status": "ok"}
 
 
-@router.get("/readyz", response_model=Status, responses=error_responses(503),
-            summary="Ready: the model is loaded and warmed up")
-async def readyz(state: State) -> dict[str, str]:
+@router.get("/readyz", response_model=Readiness, responses=error_responses(503),
+            summary="Ready: the model is loaded and warmed up",
+            description="`outputs` tells how each output (MQTT, webhooks, history) is doing; an "
+                        "unreachable broker or receiver shows there and never makes the service unready.")
+async def readyz(state: State) -> dict[str, Any]:
     if not state.runner.ready:
         raise ApiError(503, "not_ready", "the model is warming up", headers={"Retry-After": "1"})
-    return {"status": "ready"}
+    return {"status": "ready", "outputs": state.outputs.dispatcher.health()}

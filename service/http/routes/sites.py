@@ -103,7 +103,7 @@ def site_not_found(site_id: str) -> ApiError:
     return ApiError(404, "site_not_found", f"no camera names site {site_id!r}")
 
 
-async def _require_site(state: ServiceState, site_id: str) -> None:
+async def require_site(state: ServiceState, site_id: str) -> None:
     try:
         await run_in_threadpool(state.site_store.require, site_id)
     except SiteNotFoundError:
@@ -202,7 +202,7 @@ async def delete_line(state: State, site_id: str = SiteId, line_id: str = LineId
 @router.get("/v1/sites/{site_id}/occupancy", response_model=Occupancy, dependencies=[ReadAccess],
             responses=_errors(401, 404, 422), summary="The fused, tracked people of a site now")
 async def get_occupancy(state: State, site_id: str = SiteId) -> JSONResponse:
-    await _require_site(state, site_id)
+    await require_site(state, site_id)
     occupancy = await run_in_threadpool(state.sites.occupancy, site_id)
     return JSONResponse(occupancy, headers={"Cache-Control": "no-store"})
 
@@ -222,7 +222,7 @@ def _event(name: str, data: dict[str, Any]) -> str:
                 "slows detection. With a read token, a browser's EventSource passes it as `access_token`.",
 )
 async def site_events(request: Request, state: State, site_id: str = SiteId) -> StreamingResponse:
-    await _require_site(state, site_id)
+    await require_site(state, site_id)
     watcher = await run_in_threadpool(state.sites.watch, site_id, asyncio.get_running_loop())
 
     async def stream() -> AsyncIterator[str]:

@@ -1,9 +1,11 @@
 // The live site map page (/site): pick a site, draw its cameras, zones and lines, and follow its
 // occupancy as the service streams it (Server-Sent Events, /v1/sites/{site}/events): people as
-// dots with their track ids and recent trails, zone counts, line tallies. Routes: #/<site id>.
+// dots with their track ids and recent trails, zone counts, line tallies; and its counts history
+// (site_history.js), drawn again at most every HISTORY_EVERY_MS while updates come. Routes: #/<site id>.
 
 import { ApiError } from "./api.js";
 import { fmt, fmtPair, html } from "./dom.js";
+import { drawHistory, historyQuery } from "./site_history.js";
 import { drawSiteMap, speedText } from "./site_map.js";
 
 const $ = (id) => document.getElementById(id);
@@ -15,7 +17,9 @@ const state = {
   updates: 0,         // occupancy events received for the shown site
   trails: new Map(),  // track id -> [{t, xy}], oldest first
   source: null,       // the EventSource of the shown site
+  historyAt: 0,       // when (ms, page clock) the history was last asked for
 };
+const HISTORY_EVERY_MS = 10000;
 window.fishlocSite = { state };
 
 // With FISHLOC_READ_TOKEN set, site reads and events need it: asked for on a 401, kept for the tab.
@@ -118,6 +122,27 @@ function accept(occupancy) {
   state.occupancy = occupancy;
   updateTrails(occupancy, Number($("trail-seconds").value));
   render();
+  if (performance.now() - state.historyAt > HISTORY_EVERY_MS) loadHistory();
+}
+
+async function loadHistory() {
+  const site = state.site;
+  if (!site) return;
+  state.historyAt = performance.now();
+  const endS = state.occupancy?.time ?? Date.now() / 1000;
+  const query = historyQuery(site.id, endS, $("history-range").value);
+  $("history-csv").href = `${query.path}&format=csv`;
+  const chart = $("history-chart");
+  try {
+    const history = await getJson(query.path);
+    if (state.site?.id !== site.id) return;
+    drawHistory(chart, history.rows, query);
+    chart.dataset.state = "drawn";
+    chart.dataset.range = $("history-range").value;
+  } catch (error) {
+    chart.dataset.state = "error";
+    setStatus(`history: ${error.message}`, true);
+  }
 }
 
 function setLive(live) {
@@ -159,6 +184,7 @@ async function showSite(siteId) {
   for (const link of $("site-list").querySelectorAll("a")) link.classList.toggle("active", link.dataset.site === siteId);
   accept(await getJson(`/v1/sites/${encodeURIComponent(siteId)}/occupancy`));
   render();
+  await loadHistory();
   follow(siteId);
 }
 
@@ -202,6 +228,8 @@ async function main() {
   window.addEventListener("hashchange", route);
   $("trail-seconds").addEventListener("change", render);
   $("map-extent").addEventListener("change", render);
+  $("history-range").addEventListener("change", loadHistory);
+  $("history-refresh").addEventListener("click", loadHistory);
   window.addEventListener("resize", render);
   await route();
 }

@@ -18,7 +18,9 @@ JPEG = {"content-type": "image/jpeg"}
 
 def test_health_and_model(live_server: LiveServer) -> None:
     assert httpx.get(f"{live_server.url}/healthz").json() == {"status": "ok"}
-    assert httpx.get(f"{live_server.url}/readyz").json() == {"status": "ready"}
+    ready = httpx.get(f"{live_server.url}/readyz").json()
+    assert ready["status"] == "ready"
+    assert ready["outputs"]["history"] == {"ok": True} and ready["outputs"]["webhooks"] == {"ok": True}
     model = httpx.get(f"{live_server.url}/v1/model").json()
     assert model["name"] == "plumbing-double" and model["version"] == "0.0-test"
     assert model["input_size"] == 256 and model["trained_on"] == "nothing (test double)"
