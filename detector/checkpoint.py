@@ -161,6 +161,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--nms-iou", type=float, default=None, help="the rotated NMS IoU")
     parser.add_argument("--peaks", action="store_true", help="its graph takes the top K among peak cells")
     parser.add_argument("--planned", action="store_true", help="its graph takes planned views (any size)")
+    parser.add_argument("--wise-ft", metavar="PRETRAINED_ONNX", default=None,
+                        help="interpolate the fine-tuned head towards this COCO YOLOX-Nano's (WiSE-FT)")
+    parser.add_argument("--wise-alpha", type=float, default=0.9,
+                        help="weight of the fine-tuned head in that interpolation (default 0.9)")
     args = parser.parse_args(argv)
     try:
         info = load_checkpoint(args.source).info
@@ -171,6 +175,11 @@ def main(argv: list[str] | None = None) -> int:
                          nms_iou=info.nms_iou if args.nms_iou is None else args.nms_iou)
         graph = {name: True for name in ("peaks", "planned") if getattr(args, name)}
         shipped = save_release(args.source, args.target, info, graph)
+        if args.wise_ft is not None:
+            from detector.yolox.wise import wise_checkpoint
+
+            shipped = wise_checkpoint(shipped, args.wise_ft, args.wise_alpha)
+            save_checkpoint(args.target, shipped)
     except CheckpointError as error:
         print(f"detector.checkpoint: {error}", file=sys.stderr)
         return 2

@@ -1,0 +1,51 @@
+"""The head interpolated towards the pretrained one (WiSE-FT): only the head moves."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from detector.yolox.wise import interpolate_head
+
+
+def _states() -> tuple[dict[str, torch.Tensor], dict[str, torch.Tensor]]:
+    pretrained = {"backbone.w": torch.ones(3), "head.cls.w": torch.zeros(2, 2),
+                  "head.steps": torch.tensor(7), "foot.w": torch.zeros(4)}
+    fine_tuned = {"backbone.w": torch.ones(3), "head.cls.w": torch.full((2, 2), 4.0),
+                  "head.steps": torch.tensor(7), "foot.w": torch.full((4,), 9.0)}
+    return fine_tuned, pretrained
+
+
+@pytest.mark.parametrize(("alpha", "head"), [(1.0, 4.0), (0.0, 0.0), (0.9, 3.6), (0.25, 1.0)])
+def test_only_the_head_is_interpolated(alpha: float, head: float) -> None:
+    fine_tuned, pretrained = _states()
+    blended = interpolate_head(fine_tuned, pretrained, alpha)
+    assert torch.allclose(blended["head.cls.w"], torch.full((2, 2), head))
+    assert torch.equal(blended["backbone.w"], fine_tuned["backbone.w"])
+    assert torch.equal(blended["foot.w"], fine_tuned["foot.w"])  # the foot branch is the fine-tuned one's
+    assert torch.equal(blended["head.steps"], torch.tensor(7))  # integer buffers are not averaged
+    assert torch.equal(fine_tuned["head.cls.w"], torch.full((2, 2), 4.0))  # the input is left alone
+
+
+def test_a_network_trained_beyond_its_head_is_refused() -> None:
+    fine_tuned, pretrained = _states()
+    fine_tuned["backbone.w"] = torch.full((3,), 2.0)
+    with pytest.raises(ValueError, match="outside the head"):
+        interpolate_head(fine_tuned, pretrained, 0.9)
+
+
+@pytest.mark.parametrize("change", ["missing", "shape"])
+def test_heads_that_do_not_match_are_refused(change: str) -> None:
+    fine_tuned, pretrained = _states()
+    if change == "missing":
+        del pretrained["head.cls.w"]
+    else:
+        pretrained["head.cls.w"] = torch.zeros(3, 2)
+    with pytest.raises(ValueError, match="no counterpart"):
+        interpolate_head(fine_tuned, pretrained, 0.9)
+
+
+@pytest.mark.parametrize("alpha", [-0.1, 1.5, float("nan")])
+def test_alpha_outside_0_1_is_refused(alpha: float) -> None:
+    with pytest.raises(ValueError, match="alpha"):
+        interpolate_head(*_states(), alpha)
