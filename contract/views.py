@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -229,24 +230,26 @@ class PlannedInput:
                        0, len(starts) - 1).astype(np.int64)
 
     def _each_piece(self, values: NDArray[np.floating], rows: NDArray[np.floating], row_columns: list[int],
-                    convert: str) -> FloatArray:
-        out = np.zeros((len(values), 4 if convert == "boxes" else 2), dtype=np.float64)
+                    convert: Callable[[PolarGrid, FloatArray], FloatArray], width: int) -> FloatArray:
+        """(N, C) canvas values, each mapped by `convert` through the piece that holds its `rows`
+        (the canvas rows of `row_columns` moved into that piece, clipped to it) -> (N, width)."""
+        out = np.zeros((len(values), width), dtype=np.float64)
         piece = self._piece_of(rows)
         for index in np.unique(piece):
             grid, offset = self.plan.grids[index], self.plan.row_offsets[index]
             chosen = piece == index
             local = np.asarray(values[chosen], dtype=np.float64).copy()
             local[:, row_columns] = np.clip(local[:, row_columns] - offset, -0.5, grid.height - 0.5)
-            out[chosen] = (grid.polar_to_radius_aligned(local) if convert == "boxes"
-                           else grid.strip_to_frame(local))
+            out[chosen] = convert(grid, local)
         return out
 
     def boxes_to_frame(self, boxes: NDArray[np.floating]) -> FloatArray:
         centre_rows = (np.asarray(boxes)[:, 1] + np.asarray(boxes)[:, 3]) / 2
-        return self._each_piece(boxes, centre_rows, [1, 3], "boxes")
+        return self._each_piece(boxes, centre_rows, [1, 3], PolarGrid.polar_to_radius_aligned, 4)
 
     def points_to_frame(self, points: NDArray[np.floating]) -> FloatArray:
-        return self._each_piece(points, np.asarray(points)[:, 1], [1], "points")
+        # A point in the padding below a piece belongs to it: feet lie at the bottom of their boxes.
+        return self._each_piece(points, np.asarray(points)[:, 1], [1], PolarGrid.strip_to_frame, 2)
 
     def usable(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
         sized = (boxes[:, 2] > boxes[:, 0]) & (boxes[:, 3] > boxes[:, 1])
