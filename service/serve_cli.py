@@ -16,6 +16,7 @@ from models import DEFAULT_MODEL_PATH
 from service.core.config import Settings
 from service.core.logs import configure_logging
 from service.core.tls import TlsError
+from service.sites.bus import BusError
 
 log = logging.getLogger("fishloc.serve")
 
@@ -36,13 +37,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="camera registry: SQLite file or SQLAlchemy URL "
                              "(default ~/.local/share/fishloc/cameras.db)")
     parser.add_argument("--threads", type=int, help="inference threads (default: the container's CPU quota)")
+    parser.add_argument("--sites-bus", metavar="redis://HOST:PORT/DB",
+                        help="track sites in `fishloc sites` workers over this Redis "
+                             "(default: in this process)")
     parser.add_argument("--no-demo-camera", dest="demo_camera", action="store_const", const=False,
                         help="do not add the demo camera to a new database")
 
 
 def settings_from_args(args: argparse.Namespace) -> Settings:
     """Settings from the environment with the flags that were given on top."""
-    names = ("host", "http_port", "grpc_port", "model", "cameras", "database", "threads", "demo_camera")
+    names = ("host", "http_port", "grpc_port", "model", "cameras", "database", "threads", "demo_camera",
+             "sites_bus")
     overrides = {name: getattr(args, name) for name in names if getattr(args, name, None) is not None}
     return Settings(**overrides)
 
@@ -68,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     except CalibrationError as error:
         print(f"fishloc serve: bad camera file: {error}", file=sys.stderr)
         return 2
-    except TlsError as error:
+    except (TlsError, BusError) as error:
         print(f"fishloc serve: {error}", file=sys.stderr)
         return 2
     except (RuntimeError, OSError) as error:  # e.g. a port already in use

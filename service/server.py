@@ -27,6 +27,7 @@ from service.http.dependencies import ServiceState
 from service.http.protocol import head_deadline_protocol
 from service.runner import build_runner
 from service.sites.hub import SiteHub
+from service.sites.interface import Sites
 from service.sites.store import SiteStore
 
 log = logging.getLogger(__name__)
@@ -58,8 +59,12 @@ def build_state(settings: Settings) -> ServiceState:
         runner.close()
         raise
     site_store = SiteStore(registry)
-    sites = SiteHub(site_store, metrics)
-    runner.site_tracking = sites.track
+    sites: Sites = SiteHub(site_store, metrics)
+    if settings.sites_bus is not None:
+        from service.sites.bus_hub import BusSiteHub  # redis-py is an extra: imported only with a bus
+
+        sites = BusSiteHub(settings.sites_bus, site_store, metrics, wait_s=settings.sites_bus_wait_s)
+    sites.attach(runner)
     return ServiceState(settings=settings, runner=runner, registry=registry, metrics=metrics,
                         site_store=site_store, sites=sites)
 
@@ -91,6 +96,7 @@ class Service:
     async def start(self) -> None:
         settings = self.state.settings
         self.tls = tls_from_settings(settings)  # TlsError before anything listens
+        await self.state.sites.start()  # BusError before anything listens
         if settings.grpc_port >= 0:
             self.grpc = GrpcFrontEnd(self.state, tls=self.tls)
             await self.grpc.start()
@@ -135,6 +141,7 @@ class Service:
             self._http.should_exit = True
         stopping = [self.wait()] if self.grpc is None else [self.grpc.stop(), self.wait()]
         await asyncio.gather(*stopping)
+        await self.state.sites.stop()
         self.state.runner.close()
         self.state.registry.close()
 

@@ -68,6 +68,11 @@ class Settings(BaseSettings):
     nms_iou: float | None = Field(None, gt=0, le=1,
                                   description="rotated NMS IoU threshold (default: the model's own)")
     grpc_max_message_bytes: int = Field(32 * 1024 * 1024, ge=1024)
+    sites_bus: str | None = Field(
+        None, description="redis://HOST:PORT/DB: publish site observations there for `fishloc sites` "
+                          "workers and serve site reads from what they publish (default: track sites here)")
+    sites_bus_wait_s: float = Field(0.5, gt=0, le=10,
+                                    description="how long a detect call waits for its frame's track ids")
     log_level: str = Field("info", description="debug, info, warning, error")
     log_json: bool = Field(True, description="JSON log lines (false: plain text)")
 

@@ -14,7 +14,7 @@ from service.core.config import Settings
 from service.core.errors import ApiError
 from service.core.metrics import ServiceMetrics
 from service.runner import InferenceRunner
-from service.sites.hub import SiteHub
+from service.sites.interface import Sites
 from service.sites.store import SiteStore
 
 
@@ -27,7 +27,7 @@ class ServiceState:
     registry: CameraRegistry
     metrics: ServiceMetrics
     site_store: SiteStore
-    sites: SiteHub
+    sites: Sites
 
 
 def get_state(request: Request) -> ServiceState:

@@ -72,6 +72,8 @@ class DetectResponse(BaseModel):
     model: ModelRef
     detections: list[Detection]
     timing_ms: Timing
+    site_note: str | None = Field(
+        None, description="behind a sites bus: why the detections of a site's camera carry no track ids")
 
 
 class FitNote(BaseModel):
@@ -122,6 +124,7 @@ class ModelResponse(BaseModel):
 
 class Status(BaseModel):
     status: str
+    sites_bus: str | None = None
 
 
 def error_responses(*statuses: int) -> dict[int | str, dict[str, object]]:

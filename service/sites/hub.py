@@ -21,18 +21,18 @@ import json
 import logging
 import threading
 import time
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from typing import Any
 
 from fisheye import FisheyeCamera
 from service.core.metrics import ServiceMetrics
 from service.result import DetectionResult
+from service.sites.interface import Listeners, Occupancy, OccupancyListener
 from service.sites.store import SiteStore
 from sites import SiteLayout, SiteObservation, SiteTracker, TrackerConfig
 
 log = logging.getLogger(__name__)
 
-Occupancy = dict[str, Any]
 WATCH_QUEUE_SIZE = 16
 
 
@@ -71,7 +71,8 @@ class _Site:
     last: Occupancy | None = None
 
 
-def _layout_key(layout: SiteLayout) -> str:
+def layout_key(layout: SiteLayout) -> str:
+    """The layout as a string that changes exactly when its zones or lines do."""
     return json.dumps({"zones": {k: v.to_dict() for k, v in layout.zones.items()},
                        "lines": {k: v.to_dict() for k, v in layout.lines.items()}}, sort_keys=True)
 
@@ -89,6 +90,30 @@ class SiteHub:
         self._camera_site: dict[str, str] = {}
         self._lock = threading.Lock()  # guards the two maps, never held while tracking
         self._closed = False
+        self._listeners = Listeners()
+
+    # ----- the hub interface (`service.sites.interface.Sites`)
+
+    async def start(self) -> None:
+        pass
+
+    async def stop(self) -> None:
+        pass
+
+    def attach(self, runner: Any) -> None:
+        runner.site_tracking = self.track  # on the inference thread, right after the pipeline
+
+    async def read(self, site_id: str) -> Occupancy:
+        return await asyncio.to_thread(self.occupancy, site_id)
+
+    async def subscribe(self, site_id: str) -> Watcher:
+        return await asyncio.to_thread(self.watch, site_id, asyncio.get_running_loop())
+
+    def listen(self, listener: OccupancyListener) -> Callable[[], None]:
+        return self._listeners.add(listener)
+
+    def problem(self) -> str | None:
+        return None
 
     # ----- frames
 
@@ -114,9 +139,10 @@ class SiteHub:
             watchers = list(site.watchers)
             self.metrics.observe_site(site_id, outcome.use, before, site.tracker.line_totals(), occupancy,
                                       time.perf_counter() - started)
-        if outcome.use != "dropped_late":
+        if outcome.use != "dropped_late" and occupancy is not None:
             for watcher in watchers:
                 watcher.offer_threadsafe(occupancy)
+            self._listeners.notify(occupancy)
         return dataclasses.replace(result, track_ids=outcome.track_ids)
 
     # ----- reads and watchers
@@ -183,7 +209,7 @@ class SiteHub:
         if site is not None:
             return site
         layout = self.store.layout(site_id)
-        created = _Site(SiteTracker(site_id, self.config, layout), threading.Lock(), _layout_key(layout),
+        created = _Site(SiteTracker(site_id, self.config, layout), threading.Lock(), layout_key(layout),
                         time.monotonic())
         with self._lock:
             return self._sites.setdefault(site_id, created)
@@ -195,7 +221,7 @@ class SiteHub:
             return
         layout = self.store.layout(site_id)
         site.layout_read_at = now
-        key = _layout_key(layout)
+        key = layout_key(layout)
         if key != site.layout_key:
             site.layout_key = key
             site.tracker.set_layout(layout)

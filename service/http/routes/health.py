@@ -17,8 +17,14 @@ async def healthz() -> dict[str, str]:
 
 
 @router.get("/readyz", response_model=Status, responses=error_responses(503),
-            summary="Ready: the model is loaded and warmed up")
+            response_model_exclude_none=True,
+            summary="Ready: the model is loaded and warmed up",
+            description="Behind a sites bus, `sites_bus` says whether site state can be read: detection "
+                        "answers either way, so the replica stays ready.")
 async def readyz(state: State) -> dict[str, str]:
     if not state.runner.ready:
         raise ApiError(503, "not_ready", "the model is warming up", headers={"Retry-After": "1"})
-    return {"status": "ready"}
+    if state.settings.sites_bus is None:
+        return {"status": "ready"}
+    problem = state.sites.problem()
+    return {"status": "ready", "sites_bus": "ok" if problem is None else f"unreachable: {problem}"}
