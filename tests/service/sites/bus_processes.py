@@ -123,6 +123,7 @@ class FishlocProcess:
             if self.process.poll() is not None:
                 break
             time.sleep(0.05)
+        self.stop()
         raise RuntimeError(f"fishloc {self.args[0]} did not log {pattern.pattern!r}:\n{self.log[-3000:]}")
 
     def kill(self) -> None:
@@ -130,6 +131,7 @@ class FishlocProcess:
         assert self.process is not None
         self.process.send_signal(signal.SIGKILL)
         self.process.wait(30)
+        self._close_pipe()
 
     def stop(self) -> int:
         assert self.process is not None
@@ -140,9 +142,14 @@ class FishlocProcess:
         except subprocess.TimeoutExpired:
             self.process.kill()
             code = self.process.wait(30)
+        self._close_pipe()
+        return code
+
+    def _close_pipe(self) -> None:
         if self._reader is not None:
             self._reader.join(10)
-        return code
+        if self.process is not None and self.process.stderr is not None:
+            self.process.stderr.close()
 
 
 class Replica(FishlocProcess):
@@ -172,6 +179,7 @@ class Replica(FishlocProcess):
             except httpx.TransportError:
                 pass
             time.sleep(0.1)
+        self.stop()
         raise RuntimeError(f"the replica did not become ready:\n{self.log[-3000:]}")
 
 
