@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -28,11 +29,14 @@ from bus_processes import (
     lease_owners,
     wait_for_leases,
 )
+from service_sites import SITE, put_site_cameras, walk
 from site_sequences import render_sequence, shipped_model_server
+from test_site_events import _sse_events
 
 from evaluation.sequence_data import Sequence, read_sequence
 from evaluation.track_playback import ServerClient, install, play_through_server
 from evaluation.track_scoring import Reported, score_sequence
+from fisheye import FisheyeCamera
 from service.sites import bus
 
 STEPS = 24
@@ -202,3 +206,45 @@ def test_a_bad_or_unreachable_bus_is_a_one_line_error(role: type[FishlocProcess]
     assert done.returncode == 2, done.stderr[-2000:]
     errors = [line for line in done.stderr.splitlines() if line.startswith("fishloc ")]
     assert len(errors) == 1 and said in errors[0], done.stderr[-2000:]
+
+
+def test_writes_through_one_replica_reach_the_other_and_the_workers(
+        redis_server: RedisProcess, double_model_path: Path, demo_camera: FisheyeCamera,
+        tmp_path: Path) -> None:
+    """Cameras, zones and lines written through one replica rule what the other replica's frames do;
+    an event stream on the other replica hears every update and the site's end."""
+    database = tmp_path / "registry.db"
+    worker = Worker(redis_server.url, database).start()
+    replicas = [Replica(redis_server.url, database, wait_s=5, model=double_model_path).start()
+                for _ in range(2)]
+    try:
+        with httpx.Client(base_url=replicas[0].url, timeout=30) as writer, \
+                httpx.Client(base_url=replicas[1].url, timeout=30) as other:
+            wait_for_leases(redis_server.client(), workers=1)
+            put_site_cameras(writer, demo_camera)
+            events: list[tuple[str, dict[str, Any]]] = []
+            connected = threading.Event()
+            reader = threading.Thread(target=_sse_events, args=(f"{replicas[1].url}/v1/sites/{SITE}/events",
+                                                                events, connected), daemon=True)
+            reader.start()
+            assert connected.wait(30)
+            assert other.put(f"/v1/sites/{SITE}/zones/west", json={
+                "polygon_m": [[-5, -5], [0, -5], [0, 5], [-5, 5]]}).status_code in (200, 201)
+            assert other.put(f"/v1/sites/{SITE}/lines/door",
+                             json={"from_m": [0, -3], "to_m": [0, 3]}).status_code in (200, 201)
+            ids = walk(writer, demo_camera, start=(-1.5, 0.0), velocity=(1.0, 0.0), steps=15)
+            assert ids[-1] is not None and len({i for i in ids if i is not None}) == 1
+            occupancy = other.get(f"/v1/sites/{SITE}/occupancy").json()  # crossed from the line's left
+            assert occupancy["count"] == 1 and set(occupancy["zones"]) == {"west"}
+            assert occupancy["lines"]["door"] == {"in": 1, "out": 0}
+            for camera_id in ("cam-a", "cam-b"):  # the site loses its cameras: it ends
+                assert writer.delete(f"/v1/cameras/{camera_id}").status_code == 204
+            reader.join(30)
+            assert not reader.is_alive() and events[-1] == ("end", {"site": SITE})
+            updates = [data for name, data in events if name == "occupancy"]
+            assert len(updates) >= 15 and updates[-1]["lines"]["door"] == {"in": 1, "out": 0}
+            assert other.get(f"/v1/sites/{SITE}/occupancy").status_code == 404
+    finally:
+        for replica in replicas:
+            replica.stop()
+        worker.stop()
