@@ -349,17 +349,18 @@ class SitesWorker:
         once every replica can read the state holding it."""
         if not outbox.updates and not outbox.replies:
             return
-        latest: dict[str, Occupancy] = {}
-        for update in outbox.updates:
-            latest[update["site"]] = update
+        texts = [json.dumps(update, separators=(",", ":")) for update in outbox.updates]
+        latest: dict[str, tuple[Occupancy, str]] = {}
+        for update, text in zip(outbox.updates, texts, strict=True):
+            latest[update["site"]] = (update, text)
         async with self.redis.pipeline(transaction=False) as pipe:
-            for site_id, update in latest.items():
+            for site_id, (update, text) in latest.items():
                 if update.get("closed"):
                     pipe.hdel(bus.OCCUPANCY, site_id)
                 else:
-                    pipe.hset(bus.OCCUPANCY, site_id, json.dumps(update, separators=(",", ":")))
-            for update in outbox.updates:
-                pipe.publish(bus.OCCUPANCY, json.dumps(update, separators=(",", ":")))
+                    pipe.hset(bus.OCCUPANCY, site_id, text)
+            for text in texts:
+                pipe.publish(bus.OCCUPANCY, text)
             for reply_stream, answers in outbox.replies.items():
                 for request_id, track_ids in answers:
                     pipe.xadd(reply_stream, {"rid": request_id, "ids": json.dumps(track_ids)},
