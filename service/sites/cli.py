@@ -9,7 +9,7 @@ import os
 import signal
 import sys
 
-from service.core.config import default_database_path
+from service.core.config import Settings
 from service.core.logs import configure_logging
 
 log = logging.getLogger("fishloc.sites")
@@ -23,9 +23,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--bus", metavar="redis://HOST:PORT/DB", default=os.environ.get("FISHLOC_SITES_BUS"),
                         help="the sites bus (default: FISHLOC_SITES_BUS)")
-    parser.add_argument("--database", metavar="URL_OR_PATH", default=os.environ.get("FISHLOC_DATABASE"),
+    parser.add_argument("--database", metavar="URL_OR_PATH",
                         help="the camera registry the replicas use, for zones and lines (SQLite file or "
-                             "SQLAlchemy URL; default FISHLOC_DATABASE or ~/.local/share/fishloc/cameras.db)")
+                             "SQLAlchemy URL; default FISHLOC_DATABASE_URL, FISHLOC_DATABASE or "
+                             "~/.local/share/fishloc/cameras.db, as `fishloc serve`)")
     parser.add_argument("--host", default=os.environ.get("FISHLOC_HOST", "127.0.0.1"),
                         help="address of the metrics endpoint (default 127.0.0.1; 0.0.0.0 in containers)")
     parser.add_argument("--metrics-port", type=int, default=int(os.environ.get("FISHLOC_METRICS_PORT", "-1")),
@@ -47,7 +48,7 @@ async def _run(args: argparse.Namespace) -> int:
     except bus.BusError as error:
         print(f"fishloc sites: {error}", file=sys.stderr)
         return 2
-    registry = CameraRegistry(args.database or str(default_database_path()))
+    registry = CameraRegistry(args.database or Settings().database)
     metrics = ServiceMetrics()
     if args.metrics_port >= 0:
         server, _ = start_http_server(args.metrics_port, addr=args.host, registry=metrics.registry)

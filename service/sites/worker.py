@@ -228,12 +228,15 @@ class SitesWorker:
         log.info("partition %d handed over", number)
 
     def _drop(self, number: int) -> None:
-        self._owned.pop(number, None)
+        """Forget a partition (its successor reports its sites' figures from now on)."""
+        partition = self._owned.pop(number, None)
+        for site_id in [] if partition is None else partition.sites:
+            self.metrics.forget_site(site_id)
         self.metrics.bus_partitions.set(len(self._owned))
 
     def _drop_all(self) -> None:
-        self._owned.clear()
-        self.metrics.bus_partitions.set(0)
+        for number in list(self._owned):
+            self._drop(number)
         self._renewed_at = -math.inf
 
     async def _take_over(self, number: int) -> None:
