@@ -13,9 +13,8 @@ import threading
 import time
 from pathlib import Path
 
-import httpx
 import redis
-from service_live_server import free_port
+from service_live_server import free_port, wait_until_ready
 
 from benchmarks.redis_process import RedisProcess
 from models import DEFAULT_MODEL_PATH
@@ -113,19 +112,12 @@ class Replica(FishlocProcess):
 
     def start(self, timeout_s: float = 120) -> Replica:
         super().start()
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            assert self.process is not None
-            if self.process.poll() is not None:
-                break
-            try:
-                if httpx.get(f"{self.url}/readyz").status_code == 200:
-                    return self
-            except httpx.TransportError:
-                pass
-            time.sleep(0.1)
-        self.stop()
-        raise RuntimeError(f"the replica did not become ready:\n{self.log[-3000:]}")
+        try:
+            wait_until_ready(self.url, self.process, timeout_s)
+        except (RuntimeError, TimeoutError) as error:
+            self.stop()
+            raise RuntimeError(f"the replica did not become ready ({error}):\n{self.log[-3000:]}") from None
+        return self
 
 
 class Worker(FishlocProcess):
