@@ -1,10 +1,12 @@
 """A site tracker's whole state as plain JSON values, and back: what a tracking worker snapshots.
 
 `tracker_to_state(tracker)` holds the tracks (Kalman state, life, cameras, dwell, line anchors and
-pending crossings, history), the line tallies, the id counter and the reordering window (each frame
-of it with the state just before it), so `tracker_from_state` rebuilds a tracker that answers every
-later frame exactly as the original would: floats go through JSON as their shortest repr, which
-reads back to the same float64. The layout is not part of it (it lives in the registry); the caller
+pending crossings, history), the line tallies, the id counter and the reordering window, so
+`tracker_from_state` rebuilds a tracker that answers every later frame exactly as the original
+would: floats go through JSON as their shortest repr, which reads back to the same float64. The
+window is kept as its frames and the state before the first of them; the state before each later
+one is what stepping through the ones before it gives (the tracker keeps it so), so it is rebuilt
+rather than stored: a snapshot is two states and some frames, not one state per frame. The layout is not part of it (it lives in the registry); the caller
 hands the current one in. `observation_to_json` / `observation_from_json` carry one frame.
 """
 
@@ -23,7 +25,7 @@ from sites.observation import SiteObservation
 from sites.track import HISTORY_LENGTH, Track
 from sites.tracker import FrameCounts, SiteTracker, _Step
 
-STATE_VERSION = 1
+STATE_VERSION = 2
 
 
 def observation_to_dict(observation: SiteObservation) -> dict[str, Any]:
@@ -88,8 +90,8 @@ def tracker_to_state(tracker: SiteTracker) -> dict[str, Any]:
     return {"version": STATE_VERSION, "site_id": tracker.site_id,
             "frames": [tracker.frames.used, tracker.frames.used_late, tracker.frames.dropped_late],
             "state": _fusion_to_dict(tracker._state),
-            "window": [{"observation": observation_to_dict(step.observation),
-                        "before": _fusion_to_dict(step.before)} for step in tracker._window]}
+            "window_base": _fusion_to_dict(tracker._window[0].before) if tracker._window else None,
+            "window": [observation_to_dict(step.observation) for step in tracker._window]}
 
 
 def tracker_from_state(value: dict[str, Any], config: TrackerConfig, layout: SiteLayout) -> SiteTracker:
@@ -101,8 +103,10 @@ def tracker_from_state(value: dict[str, Any], config: TrackerConfig, layout: Sit
     tracker = SiteTracker(str(value["site_id"]), config, layout, FrameCounts(used, used_late, dropped_late))
     tracker._state = _fusion_from_dict(value["state"], config, layout)
     tracker._window = []
-    for step in value["window"]:
-        observation = observation_from_dict(step["observation"])
-        tracker._window.append(_Step(observation.capture_time, observation,
-                                     _fusion_from_dict(step["before"], config, layout)))
+    if value["window"]:
+        stepped = _fusion_from_dict(value["window_base"], config, layout)
+        for item in value["window"]:
+            observation = observation_from_dict(item)
+            tracker._window.append(_Step(observation.capture_time, observation, stepped.copy()))
+            stepped.step(observation)
     return tracker

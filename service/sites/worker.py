@@ -8,7 +8,7 @@ and a live one takes them). It reads its partitions with a consumer group and ap
 site's occupancy (the `occupancy` hash, then the channel), then answers the frame's track ids on the
 replica's reply stream.
 
-Recovery: every `snapshot_every_s` each partition with new entries is snapshotted (every tracker
+Recovery: every `snapshot_every_s` (1 s) each partition with new entries is snapshotted (every tracker
 changed since, `sites.snapshot`, and `position`: the last entry applied), through a script that
 writes only while the lease is still this worker's, so a worker that lost its lease (a long pause)
 can never overwrite its successor's state. Then, and only then, the entries are acknowledged and the
@@ -78,7 +78,7 @@ _ACK_CHUNK = 500
 class WorkerConfig:
     lease_s: float = 3.0           # a dead worker's partitions are taken over after at most this
     renew_s: float = 0.5           # leases and the worker's own key are renewed this often
-    snapshot_every_s: float = 0.5  # a partition's trackers are snapshotted this often (when changed)
+    snapshot_every_s: float = 1.0  # a partition's trackers are snapshotted this often (when changed)
     batch: int = 128               # entries read at once
     block_ms: int = 100            # how long a read waits for entries
     layout_refresh_s: float = 1.0  # zones and lines re-read at most this long after a change
