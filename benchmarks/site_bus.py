@@ -7,8 +7,9 @@ Everything runs for real on loopback: a `redis-server` of its own, a `fishloc si
 
 1. Worker throughput: `--sites` sites of 4 cameras and 20 walkers each (`benchmarks.site_fusion`'s
    scene, 10 fps) are published to the partition streams as fast as a pipeline can, while the worker
-   reads; observations/s is what it applied from the first entry sent to the last one applied (it is
-   the bottleneck: publishing is several times faster), with the worker's own CPU time beside it.
+   reads; observations/s is what it applied from the first entry sent until every site's published
+   occupancy stands at its last frame (the worker is the bottleneck: publishing is many times
+   faster), with the worker's own CPU time beside it.
 2. Added detect latency: the same sample frame of a site's camera is posted `--frames` times to each
    server, alternately (so both see the same machine), and timed at the client: p50/p95 with the
    bus against without, and the difference. A bus answer waits for the worker's track ids.
@@ -49,12 +50,11 @@ def _cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def _applied(metrics_url: str) -> float:
-    total = 0.0
-    for line in httpx.get(metrics_url, timeout=5).text.splitlines():
-        if line.startswith("fishloc_sites_entries_total{"):
-            total += float(line.rsplit(" ", 1)[1])
-    return total
+def _caught_up(client: redis.Redis, last_time: dict[str, float]) -> bool:
+    """Whether the published occupancy of every site stands at its last frame."""
+    published = client.hmget(bus.OCCUPANCY, list(last_time))
+    return all(raw is not None and json.loads(raw)["time"] == last_time[site]
+               for site, raw in zip(last_time, published, strict=True))
 
 
 def _wait_for_leases(client: redis.Redis, timeout_s: float = 60) -> None:
@@ -95,7 +95,8 @@ def worker_throughput(client: redis.Redis, worker: WorkerProcess, sites: int,
     frames = observations(scene)
     entries = [(f"{SITE}-{k}", observation_to_json(frame)) for frame in frames for k in range(sites)]
     assert worker.process is not None
-    cpu_before, applied_before = _cpu_s(worker.process.pid), _applied(worker.metrics_url)
+    cpu_before = _cpu_s(worker.process.pid)
+    last_time = {site_id: frames[-1].capture_time for site_id, _ in entries}
     started = time.perf_counter()
     for begin in range(0, len(entries), 1000):
         pipe = client.pipeline(transaction=False)
@@ -104,7 +105,7 @@ def worker_throughput(client: redis.Redis, worker: WorkerProcess, sites: int,
             pipe.xadd(stream, {"kind": "obs", "site": site_id, "obs": observation})
         pipe.execute()
     published_s = time.perf_counter() - started
-    while _applied(worker.metrics_url) - applied_before < len(entries):
+    while not _caught_up(client, last_time):
         time.sleep(0.02)
     elapsed_s = time.perf_counter() - started
     cpu_s = _cpu_s(worker.process.pid) - cpu_before

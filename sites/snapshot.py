@@ -6,8 +6,9 @@ pending crossings, history), the line tallies, the id counter and the reordering
 would: floats go through JSON as their shortest repr, which reads back to the same float64. The
 window is kept as its frames and the state before the first of them; the state before each later
 one is what stepping through the ones before it gives (the tracker keeps it so), so it is rebuilt
-rather than stored: a snapshot is two states and some frames, not one state per frame. The layout is not part of it (it lives in the registry); the caller
-hands the current one in. `observation_to_json` / `observation_from_json` carry one frame.
+rather than stored: a snapshot is two states and some frames, not one state per frame. The layout
+is not part of it (it lives in the registry); the caller hands the current one in.
+`observation_to_json` / `observation_from_json` carry one frame.
 """
 
 from __future__ import annotations

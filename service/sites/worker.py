@@ -166,8 +166,8 @@ class SitesWorker:
                 self._drop_all()
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(stop.wait(), 0.5)
-        with contextlib.suppress(*BUS_ERRORS):
-            await self.leave()
+        with contextlib.suppress(*BUS_ERRORS, TimeoutError):  # a Redis that is away cannot hold us
+            await asyncio.wait_for(self.leave(), 2 * self.config.lease_s)
 
     async def step(self) -> None:
         """One round: leases when due, one read of the owned partitions, snapshots when due."""
@@ -177,7 +177,9 @@ class SitesWorker:
             await asyncio.sleep(self.config.block_ms / 1000)
             return
         streams = {p.stream: ">" for p in self._owned.values()}
-        batches = await self.redis.xreadgroup(bus.GROUP, self.worker_id, streams, count=self.config.batch,
+        # COUNT is per stream: the batch is shared, so one step stays far shorter than a lease.
+        count = max(1, self.config.batch // len(streams))
+        batches = await self.redis.xreadgroup(bus.GROUP, self.worker_id, streams, count=count,
                                               block=self.config.block_ms)
         outbox = _Outbox()
         for stream, entries in batches or []:
@@ -198,14 +200,23 @@ class SitesWorker:
 
     # ----- leases
 
-    async def _keep_leases(self) -> None:
+    async def _renew_leases(self, taking: int | None = None) -> bool:
+        """Renew this worker's key and the leases it holds (and that of the partition it is taking
+        over); drop the partitions whose lease lapsed. Whether `taking`'s lease is still held."""
         self._renewed_at = time.monotonic()
         lease_ms = int(self.config.lease_s * 1000)
         await self.redis.set(bus.worker_key(self.worker_id), "1", px=lease_ms)
-        for number in list(self._owned):
+        held = True
+        for number in [*self._owned, *([] if taking is None else [taking])]:
             if not await self._renew(keys=[bus.lease_key(number)], args=[self.worker_id, lease_ms]):
                 log.warning("lease of partition %d lost: dropping it", number)
                 self._drop(number)
+                held = held and number != taking
+        return held
+
+    async def _keep_leases(self) -> None:
+        await self._renew_leases()
+        lease_ms = int(self.config.lease_s * 1000)
         workers = [key async for key in self.redis.scan_iter(match=bus.worker_key("*"), count=100)]
         share = math.ceil(self.config.partitions / max(len(workers), 1))
         if len(self._owned) > share:  # a worker joined: hand one partition over per round
@@ -256,9 +267,13 @@ class SitesWorker:
         outbox = _Outbox()
         while True:
             entries = await self.redis.xrange(partition.stream, min=f"({partition.position}", max="+",
-                                              count=500)
+                                              count=self.config.batch)
             if not entries:
                 break
+            # A long replay keeps the leases (this one's too) alive as it goes.
+            due = time.monotonic() - self._renewed_at >= self.config.renew_s
+            if due and not await self._renew_leases(number):
+                return
             for entry_id, fields in entries:
                 self._apply(partition, entry_id, fields, outbox, live=False)
             replayed += len(entries)

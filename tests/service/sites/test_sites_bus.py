@@ -82,12 +82,15 @@ def _metric(url: str, name: str) -> float:
 def test_two_replicas_and_two_workers_track_as_one_process_through_a_kill(
         sequence: Sequence, one_process: Reported, redis_server: RedisProcess, tmp_path: Path) -> None:
     database = tmp_path / "registry.db"
-    workers = [Worker(redis_server.url, database).start() for _ in range(2)]
+    workers = [Worker(redis_server.url, database) for _ in range(2)]
     # A long wait: every detect call answers with its track ids, across the takeover too.
-    replicas = [Replica(redis_server.url, database, wait_s=10).start() for _ in range(2)]
-    clients = [ServerClient(replica.url) for replica in replicas]
+    replicas = [Replica(redis_server.url, database, wait_s=10) for _ in range(2)]
+    clients: list[ServerClient] = []
     redis = redis_server.client()
     try:
+        for process in [*workers, *replicas]:
+            process.start()
+        clients = [ServerClient(replica.url) for replica in replicas]
         wait_for_leases(redis, workers=2)
         cameras = sorted(camera["id"] for camera in sequence.cameras)
         partition = bus.partition_of(sequence.site_id)
@@ -146,10 +149,12 @@ def _detect(client: httpx.Client, sequence: Sequence, index: int) -> list[dict[s
 def test_detection_answers_while_redis_is_down_and_the_site_resumes(
         sequence: Sequence, redis_server: RedisProcess, tmp_path: Path) -> None:
     database = tmp_path / "registry.db"
-    worker = Worker(redis_server.url, database).start()
-    replica = Replica(redis_server.url, database, wait_s=5).start()
+    worker = Worker(redis_server.url, database)
+    replica = Replica(redis_server.url, database, wait_s=5)
     site = f"/v1/sites/{sequence.site_id}"
     try:
+        worker.start()
+        replica.start()
         with httpx.Client(base_url=replica.url, timeout=30) as client:
             wait_for_leases(redis_server.client(), workers=1)
             installer = ServerClient(replica.url)
@@ -190,8 +195,9 @@ def test_detection_answers_while_redis_is_down_and_the_site_resumes(
             assert occupancy.json()["time"] == sequence.steps[-1].capture_time
             assert occupancy.json()["count"] > 0
     finally:
-        replica.stop()
-        worker.stop()
+        for process in (replica, worker):
+            if process.process is not None:
+                process.stop()
 
 
 @pytest.mark.parametrize(("url", "said"), [("http://127.0.0.1:1/0", "must be a redis://"),
@@ -214,10 +220,11 @@ def test_writes_through_one_replica_reach_the_other_and_the_workers(
     """Cameras, zones and lines written through one replica rule what the other replica's frames do;
     an event stream on the other replica hears every update and the site's end."""
     database = tmp_path / "registry.db"
-    worker = Worker(redis_server.url, database).start()
-    replicas = [Replica(redis_server.url, database, wait_s=5, model=double_model_path).start()
-                for _ in range(2)]
+    worker = Worker(redis_server.url, database)
+    replicas = [Replica(redis_server.url, database, wait_s=5, model=double_model_path) for _ in range(2)]
     try:
+        for process in [worker, *replicas]:
+            process.start()
         with httpx.Client(base_url=replicas[0].url, timeout=30) as writer, \
                 httpx.Client(base_url=replicas[1].url, timeout=30) as other:
             wait_for_leases(redis_server.client(), workers=1)
@@ -245,6 +252,6 @@ def test_writes_through_one_replica_reach_the_other_and_the_workers(
             assert len(updates) >= 15 and updates[-1]["lines"]["door"] == {"in": 1, "out": 0}
             assert other.get(f"/v1/sites/{SITE}/occupancy").status_code == 404
     finally:
-        for replica in replicas:
-            replica.stop()
-        worker.stop()
+        for process in [*replicas, worker]:
+            if process.process is not None:
+                process.stop()
