@@ -261,8 +261,9 @@ class SitesWorker:
             if value:
                 site_id = field.decode().removeprefix("site:")
                 layout = await asyncio.to_thread(self.store.layout, site_id)
-                tracker = tracker_from_state(json.loads(value), self.tracker_config, layout)
-                partition.sites[site_id] = _Site(tracker, time.monotonic())
+                saved = json.loads(value)
+                tracker = tracker_from_state(saved["tracker"], self.tracker_config, layout)
+                partition.sites[site_id] = _Site(tracker, time.monotonic(), set(saved["cameras"]))
         replayed = 0
         outbox = _Outbox()
         while True:
@@ -401,8 +402,9 @@ class SitesWorker:
             return
         values: list[str] = []
         for site_id in sorted(partition.changed):
-            state = tracker_to_state(partition.sites[site_id].tracker)
-            values += [f"site:{site_id}", json.dumps(state, separators=(",", ":"))]
+            site = partition.sites[site_id]
+            saved = {"cameras": sorted(site.cameras), "tracker": tracker_to_state(site.tracker)}
+            values += [f"site:{site_id}", json.dumps(saved, separators=(",", ":"))]
         for site_id in sorted(partition.removed):
             values += [f"site:{site_id}", ""]
         keys = [bus.lease_key(partition.number), bus.snapshot_key(partition.number), partition.stream]

@@ -85,5 +85,19 @@ async def _worker_run(url: str, store: SiteStore) -> None:
     finally:
         stop.set()
         await running
-        await client.aclose()
     assert worker.partitions == []  # a stopping worker hands every partition over
+    # A successor loads the snapshot: the camera that left ends the site, as it would have there.
+    successor = SitesWorker(client, store, ServiceMetrics(), WorkerConfig(block_ms=20))
+    stop = asyncio.Event()
+    running = asyncio.create_task(successor.run(stop))
+    try:
+        async with asyncio.timeout(30):
+            while len(successor.partitions) < bus.PARTITIONS:
+                await asyncio.sleep(0.05)
+            await client.xadd(stream, {"kind": "camera", "camera": "cam-a", "site": ""})
+            while await client.hget(bus.OCCUPANCY, "hall") is not None:
+                await asyncio.sleep(0.02)
+    finally:
+        stop.set()
+        await running
+        await client.aclose()
