@@ -124,7 +124,10 @@ class ModelResponse(BaseModel):
 
 class Status(BaseModel):
     status: str
-    sites_bus: str | None = None
+
+
+class Readiness(Status):
+    sites_bus: str | None = Field(None, description="behind a sites bus: `ok`, or why site state is not")
 
 
 def error_responses(*statuses: int) -> dict[int | str, dict[str, object]]:

@@ -6,7 +6,7 @@ from fastapi import APIRouter
 
 from service.core.errors import ApiError
 from service.http.dependencies import State
-from service.http.schemas import Status, error_responses
+from service.http.schemas import Readiness, Status, error_responses
 
 router = APIRouter(tags=["health"])
 
@@ -16,7 +16,7 @@ async def healthz() -> dict[str, str]:
     return {"status": "ok"}
 
 
-@router.get("/readyz", response_model=Status, responses=error_responses(503),
+@router.get("/readyz", response_model=Readiness, responses=error_responses(503),
             response_model_exclude_none=True,
             summary="Ready: the model is loaded and warmed up",
             description="Behind a sites bus, `sites_bus` says whether site state can be read: detection "
