@@ -95,9 +95,13 @@ def install(client: ServerClient, sequence: Sequence) -> None:
 
 
 def play_through_server(client: ServerClient, sequence: Sequence, on_step: Callable[[], None] | None = None,
-                        min_score: float | None = None) -> Reported:
+                        min_score: float | None = None, *,
+                        frames_to: Callable[[str], ServerClient] | None = None,
+                        read_from: Callable[[int], ServerClient] | None = None) -> Reported:
     """Install the sequence, post its frames step by step (with `min_score`, else the model's
-    threshold), read the occupancy after each step."""
+    threshold), read the occupancy after each step. All through `client`, unless `frames_to(camera
+    id)` names the server of a camera's frames and `read_from(step index)` the one to read from
+    (replicas behind a sites bus)."""
     install(client, sequence)
     occupancy_path = f"/v1/sites/{_quoted(sequence.site_id)}/occupancy"
     reported = Reported()
@@ -110,12 +114,13 @@ def play_through_server(client: ServerClient, sequence: Sequence, on_step: Calla
             if min_score is not None:
                 parameters["min_score"] = repr(min_score)
             query = urllib.parse.urlencode(parameters)
-            _, answer = client.request("POST", f"/v1/cameras/{_quoted(frame.camera_id)}/detect?{query}",
+            sender = client if frames_to is None else frames_to(frame.camera_id)
+            _, answer = sender.request("POST", f"/v1/cameras/{_quoted(frame.camera_id)}/detect?{query}",
                                        frame.path.read_bytes(), "image/jpeg")
             reported.detections.append((index, frame.camera_id, [
                 (float(d["site_position_m"][0]), float(d["site_position_m"][1]))
                 for d in answer["detections"] if d.get("site_position_m") is not None]))
-        _, occupancy = client.request("GET", occupancy_path)
+        _, occupancy = (client if read_from is None else read_from(index)).request("GET", occupancy_path)
         reported.add(occupancy)
         if on_step is not None:
             on_step()

@@ -17,6 +17,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench": ("benchmarks.cli", "latency and throughput on realistic frames (in process, HTTP, gRPC)"),
     "calibrate": ("fisheye.calibrate_cli", "fit a camera's lens from ruler marks, or import OpenCV K/D"),
     "serve": ("service.serve_cli", "serve the model over REST and gRPC (default model, demo camera)"),
+    "sites": ("service.sites.cli", "track sites behind a sites bus: the workers of `serve --sites-bus`"),
     "gateway": ("service.gateway.cli", "stream a camera's frames to a server over gRPC, print the answers"),
     "synth": ("detector.data.synth_cli", "render synthetic fisheye frames with exact ground truth"),
     "export": ("exporter.export", "turn a training checkpoint into a verified ONNX model (optional INT8)"),

@@ -91,6 +91,8 @@ class DetectionResult:
     masked: int = 0  # detections dropped because their foot point fell inside one of the camera's masks
     # For a camera of a site: (N,) the confirmed track of each detection (None: not (yet) tracked).
     track_ids: tuple[str | None, ...] | None = None
+    # Why a site's camera's detections carry no track ids (the sites bus did not answer in time).
+    site_note: str | None = None
 
 
 def _number(value: float, digits: int) -> float | None:
@@ -122,7 +124,7 @@ def detection_to_json(detections: Detections, index: int, track_id: str | None =
 
 def result_to_json(result: DetectionResult) -> dict[str, Any]:
     """The JSON answer of `POST /v1/cameras/{id}/detect`."""
-    return {
+    answer = {
         "camera_id": result.camera_id,
         "frame_id": result.frame_id,
         "image": {"width": result.image_wh[0], "height": result.image_wh[1]},
@@ -131,3 +133,6 @@ def result_to_json(result: DetectionResult) -> dict[str, Any]:
                                          else result.track_ids[i]) for i in range(len(result.detections))],
         "timing_ms": {stage: round(result.timing_ms.get(stage, 0.0), 3) for stage in STAGES},
     }
+    if result.site_note is not None:
+        answer["site_note"] = result.site_note
+    return answer

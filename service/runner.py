@@ -14,7 +14,7 @@ import dataclasses
 import logging
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Awaitable, Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -35,6 +35,8 @@ log = logging.getLogger(__name__)
 
 # What follows the pipeline for a camera of a site (`SiteHub.track`): the result with its track ids.
 SiteTracking = Callable[[FisheyeCamera, DetectionResult, float], DetectionResult]
+# Or, behind a sites bus (`BusSiteHub.forward`): on the event loop, after the pipeline.
+SiteForwarding = Callable[[FisheyeCamera, DetectionResult, float], Awaitable[DetectionResult]]
 
 
 class OverloadedError(RuntimeError):
@@ -65,6 +67,7 @@ class InferenceRunner:
         self._ready = threading.Event()
         self.latest = LatestFrames()  # what the viewer shows: each camera's last frame, any front end
         self.site_tracking: SiteTracking | None = None
+        self.site_forwarding: SiteForwarding | None = None
         info = pipeline.info
         labels = {"name": info.name, "version": info.version, "input_size": str(info.input_size)}
         metrics.model_info.labels(**labels).set(1)
@@ -144,6 +147,8 @@ class InferenceRunner:
         except FrameError as error:
             self.metrics.frame_errors.labels(code=error.code).inc()
             raise
+        if self.site_forwarding is not None:
+            result = await self.site_forwarding(camera, result, when)
         self.metrics.observe_result(result, frontend)
         self.latest.record(data, result, frontend)
         return result

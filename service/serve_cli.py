@@ -16,6 +16,7 @@ from models import DEFAULT_MODEL_PATH
 from service.core.config import Settings
 from service.core.logs import configure_logging
 from service.core.tls import TlsError
+from service.sites.bus import BusError
 
 log = logging.getLogger("fishloc.serve")
 
@@ -42,6 +43,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mqtt-prefix", help="MQTT topic prefix (default fishloc)")
     parser.add_argument("--history-retention-days", type=float,
                         help="days of counts history kept per site (default 400)")
+    parser.add_argument("--sites-bus", metavar="redis://HOST:PORT/DB",
+                        help="track sites in `fishloc sites` workers over this Redis "
+                             "(default: in this process)")
     parser.add_argument("--no-demo-camera", dest="demo_camera", action="store_const", const=False,
                         help="do not add the demo camera to a new database")
     parser.add_argument("--max-view-pixels", type=int, metavar="PIXELS",
@@ -52,7 +56,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def settings_from_args(args: argparse.Namespace) -> Settings:
     """Settings from the environment with the flags that were given on top."""
     names = ("host", "http_port", "grpc_port", "model", "cameras", "database", "threads", "demo_camera",
-             "max_view_pixels", "mqtt", "mqtt_prefix", "history_retention_days")
+             "max_view_pixels", "mqtt", "mqtt_prefix", "history_retention_days", "sites_bus")
     overrides = {name: getattr(args, name) for name in names if getattr(args, name, None) is not None}
     return Settings(**overrides)
 
@@ -78,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
     except CalibrationError as error:
         print(f"fishloc serve: bad camera file: {error}", file=sys.stderr)
         return 2
-    except TlsError as error:
+    except (TlsError, BusError) as error:
         print(f"fishloc serve: {error}", file=sys.stderr)
         return 2
     except (RuntimeError, OSError) as error:  # e.g. a port already in use

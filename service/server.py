@@ -25,9 +25,11 @@ from service.grpc.server import GrpcFrontEnd
 from service.http.app import create_app
 from service.http.dependencies import ServiceState
 from service.http.protocol import head_deadline_protocol
+from service.outputs.attach import attach_outputs
 from service.outputs.build import build_outputs
 from service.runner import build_runner
 from service.sites.hub import SiteHub
+from service.sites.interface import Sites
 from service.sites.store import SiteStore
 
 log = logging.getLogger(__name__)
@@ -60,8 +62,18 @@ def build_state(settings: Settings) -> ServiceState:
         raise
     site_store = SiteStore(registry)
     outputs = build_outputs(settings, registry.engine, metrics)
-    sites = SiteHub(site_store, metrics, updates=outputs.dispatcher.offer)
-    runner.site_tracking = sites.track
+    sites: Sites
+    if settings.sites_bus is not None:
+        from service.sites.bus_hub import BusSiteHub  # redis-py is an extra: imported only with a bus
+
+        # The outputs run where the trackers do, in the `fishloc sites` workers: one of each
+        # crossing, not one per replica. This replica serves their routes from the database.
+        sites = BusSiteHub(settings.sites_bus, site_store, metrics, wait_s=settings.sites_bus_wait_s)
+    else:
+        hub = SiteHub(site_store, metrics)
+        attach_outputs(outputs.dispatcher, hub, site_store)
+        sites = hub
+    sites.attach(runner)
     return ServiceState(settings=settings, runner=runner, registry=registry, metrics=metrics,
                         site_store=site_store, sites=sites, outputs=outputs)
 
@@ -93,11 +105,14 @@ class Service:
     async def start(self) -> None:
         settings = self.state.settings
         self.tls = tls_from_settings(settings)  # TlsError before anything listens
-        await self.state.outputs.dispatcher.start()
+        await self.state.sites.start()  # BusError before anything listens
+        if settings.sites_bus is None:
+            await self.state.outputs.dispatcher.start()
         try:
             await self._serve(settings)
         except BaseException:
             await self.state.outputs.dispatcher.close()
+            await self.state.sites.stop()
             raise
 
     async def _serve(self, settings: Settings) -> None:
@@ -146,6 +161,7 @@ class Service:
         stopping = [self.wait()] if self.grpc is None else [self.grpc.stop(), self.wait()]
         await asyncio.gather(*stopping)
         await self.state.outputs.dispatcher.close()  # after the last frame: its update is written
+        await self.state.sites.stop()
         self.state.runner.close()
         self.state.registry.close()
 

@@ -1,6 +1,6 @@
 """FishLoc sites: people of several overlapping overhead cameras fused on one floor plan and tracked.
 
-Torch-free and service-free (numpy, OpenCV's Kalman filter, scipy's assignment, shapely): the
+Torch-free and service-free (numpy, OpenCV's Kalman filter, shapely): the
 service feeds it the frames it serves, and an evaluation can feed it ground-truth detections
 directly. The in-process API:
 

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.distance import cdist
+
+from sites.assignment import pairwise_distance_m
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -37,7 +38,7 @@ def merge_on_floor(positions_m: FloatArray, distance_m: FloatArray, scores: Floa
     radius_pair = np.maximum(radius[:, None], radius[None, :])                # (N, N)
     sure = scores >= sure_score
     radius_pair = np.where(sure[:, None] & sure[None, :], radius_base_m, radius_pair)
-    near = cdist(positions_m, positions_m) <= radius_pair                     # (N, N)
+    near = pairwise_distance_m(positions_m, positions_m) <= radius_pair                     # (N, N)
     for index in np.argsort(-scores, kind="stable"):
         if kept_for[index] < 0:
             kept_for[near[index] & (kept_for < 0)] = index

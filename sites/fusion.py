@@ -2,11 +2,11 @@
 
 Frames of all the site's cameras go through one `FusionState` in capture_time order (the tracker's
 reordering window sees to the order). A step predicts every track to the frame's time, assigns the
-frame's people to tracks (Hungarian assignment, scipy, on the Mahalanobis distance of each position
-to each track, gated), updates the matched tracks, starts tentative tracks for the rest, and ends
-tracks unseen for too long. Overlapping views merge because the second camera's frame of the same
-instant meets tracks the first camera's frame has just updated: a person seen by two cameras feeds
-one track twice, and the gate accounts for each position's uncertainty, which grows with the
+frame's people to tracks (Hungarian assignment, `sites.assignment`, on the Mahalanobis distance of
+each position to each track, gated), updates the matched tracks, starts tentative tracks for the
+rest, and ends tracks unseen for too long. Overlapping views merge because the second camera's
+frame of the same instant meets tracks the first camera's frame has just updated: a person seen by
+two cameras feeds one track twice, and the gate accounts for each position's uncertainty, which grows with the
 distance from the camera's nadir (`sigma_base_m + sigma_per_m · distance`).
 
 A real detector's frame is cleaned up first: its detections of one person are merged on the floor
@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import linear_sum_assignment
 
+from sites.assignment import linear_sum_assignment
 from sites.counting import SiteCounts
 from sites.floor_merge import merge_on_floor
 from sites.layout import SiteLayout
@@ -192,7 +192,12 @@ class FusionState:
         if len(track_index) == 0 or len(det_index) == 0:
             return []
         costs = self._costs([self.tracks[i] for i in track_index], z_m[det_index], noise_m2[det_index])
-        ti, di = linear_sum_assignment(costs)
+        # A track with no detection in its gate, or a detection in no track's, can only be paired
+        # outside the gate: leaving them out changes no pair within it and keeps the problem small.
+        gated = costs < _UNASSIGNABLE
+        live_tracks, live_detections = np.flatnonzero(gated.any(axis=1)), np.flatnonzero(gated.any(axis=0))
+        ti, di = linear_sum_assignment(costs[np.ix_(live_tracks, live_detections)])
+        ti, di = live_tracks[ti], live_detections[di]
         matched = costs[ti, di] < _UNASSIGNABLE
         return [(int(track_index[a]), int(det_index[b]))
                 for a, b in zip(ti[matched], di[matched], strict=True)]

@@ -39,6 +39,7 @@ def scrape_config(target: str) -> dict[str, Any]:
     jobs = [job for job in config["scrape_configs"] if job["job_name"] == "fishloc"]
     if len(jobs) != 1:
         raise SystemExit(f"{CONFIG} has no single `fishloc` job")
+    config["scrape_configs"] = jobs  # the compose file's other targets do not exist here
     jobs[0]["static_configs"] = [{"targets": [target]}]
     jobs[0]["scrape_interval"] = "1s"
     config["global"]["scrape_interval"] = "1s"

@@ -33,3 +33,4 @@ fi
 step docker-engine bash deploy/ci/docker-engine.sh
 step docker-base bash deploy/ci/docker-base.sh
 step docker-smoke bash deploy/ci/docker-smoke.sh
+step docker-bus bash deploy/ci/docker-bus-smoke.sh

@@ -83,6 +83,11 @@ class Settings(BaseSettings):
     history_retention_days: float = Field(400.0, gt=0, description="days of counts history kept per site")
     webhook_timeout_s: float = Field(5.0, gt=0, description="a webhook receiver slower than this has failed")
     webhook_max_backoff_s: float = Field(60.0, gt=0, description="longest wait between a webhook's retries")
+    sites_bus: str | None = Field(
+        None, description="redis://HOST:PORT/DB: publish site observations there for `fishloc sites` "
+                          "workers and serve site reads from what they publish (default: track sites here)")
+    sites_bus_wait_s: float = Field(0.5, gt=0, le=10,
+                                    description="how long a detect call waits for its frame's track ids")
     log_level: str = Field("info", description="debug, info, warning, error")
     log_json: bool = Field(True, description="JSON log lines (false: plain text)")
 

@@ -85,6 +85,24 @@ class ServiceMetrics:
             "fishloc_site_fusion_seconds", "Fusion and tracking time of one frame of a site's camera.",
             buckets=_FUSION_BUCKETS_S, registry=self.registry,
         )
+        # Behind a sites bus (`fishloc serve --sites-bus`): frames whose observation Redis did not take,
+        # and frames answered before the tracker did; in a `fishloc sites` worker, its partitions and
+        # the entries it applied (live, or replayed after taking a partition over).
+        self.site_observations_undelivered = Counter(
+            "fishloc_site_observations_undelivered", "Site observations the sites bus did not take "
+            "(Redis unreachable): their frames were answered without track ids.", ["site"],
+            registry=self.registry,
+        )
+        self.site_answers_late = Counter(
+            "fishloc_site_answers_late", "Frames answered without track ids because no tracker answered "
+            "within the wait (the frame is still tracked).", ["site"], registry=self.registry,
+        )
+        self.bus_partitions = Gauge("fishloc_sites_partitions", "Site partitions this worker owns now.",
+                                    registry=self.registry)
+        self.bus_entries = Counter(
+            "fishloc_sites_entries", "Bus entries this worker applied: live, or replayed after a snapshot "
+            "when it took a partition over.", ["how"], registry=self.registry,
+        )
         self._site_labels: set[str] = set()
         self._zone_labels: dict[str, set[str]] = {}
         self.model_info = Gauge(

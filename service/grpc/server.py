@@ -35,6 +35,7 @@ from service.grpc.stream import FrameStream
 from service.http.dependencies import ServiceState, bearer_matches, read_token_passes
 from service.result import DetectionResult
 from service.runner import OverloadedError
+from service.sites.interface import SitesUnavailableError
 from sites.layout import NAME_PATTERN
 
 log = logging.getLogger(__name__)
@@ -270,7 +271,10 @@ class LocalizerServicer:
             await _abort(context, grpc.StatusCode.NOT_FOUND,
                          f"site_not_found: no camera names site {site_id!r}")
         sites = self.state.sites
-        watcher = await asyncio.to_thread(sites.watch, site_id, asyncio.get_running_loop())
+        try:
+            watcher = await sites.subscribe(site_id)
+        except SitesUnavailableError as error:
+            await _abort(context, grpc.StatusCode.UNAVAILABLE, f"sites_unavailable: {error}")
         try:
             async for update in watcher.updates():
                 yield occupancy_to_message(update)

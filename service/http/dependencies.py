@@ -15,7 +15,7 @@ from service.core.errors import ApiError
 from service.core.metrics import ServiceMetrics
 from service.outputs.build import Outputs
 from service.runner import InferenceRunner
-from service.sites.hub import SiteHub
+from service.sites.interface import Sites
 from service.sites.store import SiteStore
 
 
@@ -28,7 +28,7 @@ class ServiceState:
     registry: CameraRegistry
     metrics: ServiceMetrics
     site_store: SiteStore
-    sites: SiteHub
+    sites: Sites
     outputs: Outputs
 
 

@@ -72,6 +72,8 @@ class DetectResponse(BaseModel):
     model: ModelRef
     detections: list[Detection]
     timing_ms: Timing
+    site_note: str | None = Field(
+        None, description="behind a sites bus: why the detections of a site's camera carry no track ids")
 
 
 class FitNote(BaseModel):
@@ -158,7 +160,9 @@ class Status(BaseModel):
 
 class Readiness(Status):
     outputs: dict[str, dict[str, Any]] = Field(
-        default_factory=dict, description="per output: `ok` and what is wrong (e.g. the broker's error)")
+        default_factory=dict, description="per output: `ok` and what is wrong (e.g. the broker's error); "
+                                          "behind a sites bus the outputs run in the `fishloc sites` workers")
+    sites_bus: str | None = Field(None, description="behind a sites bus: `ok`, or why site state is not")
 
 
 def error_responses(*statuses: int) -> dict[int | str, dict[str, object]]:

@@ -8,8 +8,8 @@ that drop their oldest update when full: a slow client loses updates, it never s
 
 A camera that moves to another site, or is deleted, leaves its old site: the tracks only it saw end
 (`SiteTracker.remove_camera`), and a site that no camera names any more closes its watchers' streams.
-Every occupancy update is also handed to `updates` (the outputs' dispatcher, `service.outputs`), under
-the site's lock so a site's updates keep their order; it must return at once.
+Every occupancy update also goes to the hub's listeners (`listen`; the outputs attach there,
+`service.outputs.attach`), after the frame that made it and when a camera leaves a site.
 Zones and lines are read from the registry's database when a site's tracker starts, when they are
 written through this process, and at most `layout_refresh_s` after a write through another process.
 """
@@ -29,13 +29,12 @@ from typing import Any
 from fisheye import FisheyeCamera
 from service.core.metrics import ServiceMetrics
 from service.result import DetectionResult
+from service.sites.interface import Listeners, Occupancy, OccupancyListener
 from service.sites.store import SiteStore
 from sites import SiteLayout, SiteObservation, SiteTracker, TrackerConfig
 
 log = logging.getLogger(__name__)
 
-Occupancy = dict[str, Any]
-UpdateFeed = Callable[[str, Occupancy, SiteLayout], None]
 WATCH_QUEUE_SIZE = 16
 
 
@@ -74,7 +73,8 @@ class _Site:
     last: Occupancy | None = None
 
 
-def _layout_key(layout: SiteLayout) -> str:
+def layout_key(layout: SiteLayout) -> str:
+    """The layout as a string that changes exactly when its zones or lines do."""
     return json.dumps({"zones": {k: v.to_dict() for k, v in layout.zones.items()},
                        "lines": {k: v.to_dict() for k, v in layout.lines.items()}}, sort_keys=True)
 
@@ -83,9 +83,8 @@ class SiteHub:
     """Trackers and watchers of every site this process has seen."""
 
     def __init__(self, store: SiteStore, metrics: ServiceMetrics, config: TrackerConfig | None = None,
-                 layout_refresh_s: float = 1.0, updates: UpdateFeed | None = None) -> None:
+                 layout_refresh_s: float = 1.0) -> None:
         self.store = store
-        self.updates = updates
         self.metrics = metrics
         self.config = config or TrackerConfig()
         self.layout_refresh_s = layout_refresh_s
@@ -93,6 +92,30 @@ class SiteHub:
         self._camera_site: dict[str, str] = {}
         self._lock = threading.Lock()  # guards the two maps, never held while tracking
         self._closed = False
+        self._listeners = Listeners()
+
+    # ----- the hub interface (`service.sites.interface.Sites`)
+
+    async def start(self) -> None:
+        pass
+
+    async def stop(self) -> None:
+        pass
+
+    def attach(self, runner: Any) -> None:
+        runner.site_tracking = self.track  # on the inference thread, right after the pipeline
+
+    async def read(self, site_id: str) -> Occupancy:
+        return await asyncio.to_thread(self.occupancy, site_id)
+
+    async def subscribe(self, site_id: str) -> Watcher:
+        return await asyncio.to_thread(self.watch, site_id, asyncio.get_running_loop())
+
+    def listen(self, listener: OccupancyListener) -> Callable[[], None]:
+        return self._listeners.add(listener)
+
+    def problem(self) -> str | None:
+        return None
 
     # ----- frames
 
@@ -116,13 +139,12 @@ class SiteHub:
             occupancy = site.tracker.occupancy() if outcome.use != "dropped_late" else site.last
             site.last = occupancy
             watchers = list(site.watchers)
-            if self.updates is not None and occupancy is not None and outcome.use != "dropped_late":
-                self.updates(site_id, occupancy, site.tracker.layout)
             self.metrics.observe_site(site_id, outcome.use, before, site.tracker.line_totals(), occupancy,
                                       time.perf_counter() - started)
-        if outcome.use != "dropped_late":
+        if outcome.use != "dropped_late" and occupancy is not None:
             for watcher in watchers:
                 watcher.offer_threadsafe(occupancy)
+            self._listeners.notify(occupancy)
         return dataclasses.replace(result, track_ids=outcome.track_ids)
 
     # ----- reads and watchers
@@ -189,7 +211,7 @@ class SiteHub:
         if site is not None:
             return site
         layout = self.store.layout(site_id)
-        created = _Site(SiteTracker(site_id, self.config, layout), threading.Lock(), _layout_key(layout),
+        created = _Site(SiteTracker(site_id, self.config, layout), threading.Lock(), layout_key(layout),
                         time.monotonic())
         with self._lock:
             return self._sites.setdefault(site_id, created)
@@ -201,7 +223,7 @@ class SiteHub:
             return
         layout = self.store.layout(site_id)
         site.layout_read_at = now
-        key = _layout_key(layout)
+        key = layout_key(layout)
         if key != site.layout_key:
             site.layout_key = key
             site.tracker.set_layout(layout)
@@ -225,8 +247,7 @@ class SiteHub:
             left.cameras.discard(camera_id)
             left.last = left.tracker.occupancy()
             watchers = list(left.watchers)
-            if self.updates is not None:
-                self.updates(old, left.last, left.tracker.layout)
+            self._listeners.notify(left.last)  # the ended tracks leave the outputs' counts too
         log.info("camera %s left site %s: %d tracks ended", camera_id, old, ended,
                  extra={"camera_id": camera_id})
         if old not in self.store.site_cameras():

@@ -135,16 +135,61 @@ def test_disruption_budget_leaves_room_to_drain() -> None:
     assert resources[("PodDisruptionBudget", "fishloc")]["spec"]["minAvailable"] < min_replicas
 
 
-def test_prometheus_scrapes_the_compose_service() -> None:
+def test_prometheus_scrapes_the_compose_replicas_and_workers() -> None:
     compose = yaml.safe_load((DEPLOY / "compose.yaml").read_text(encoding="utf-8"))
     prometheus = yaml.safe_load((DEPLOY / "prometheus" / "prometheus.yml").read_text(encoding="utf-8"))
-    (job,) = [job for job in prometheus["scrape_configs"] if job["job_name"] == "fishloc"]
-    assert job["metrics_path"] == "/metrics"
-    (target,) = job["static_configs"][0]["targets"]
-    host, port = target.split(":")
-    assert host in compose["services"]
-    assert any(mapping.endswith(f":{port}") for mapping in compose["services"][host]["ports"])
+    jobs = prometheus["scrape_configs"]
+    targets = {target for job in jobs for target in job["static_configs"][0]["targets"]}
+    assert {target.split(":")[0] for target in targets} == {"fishloc-1", "fishloc-2", "sites-1", "sites-2"}
+    for target in targets:
+        host, port = target.split(":")
+        assert port in compose["services"][host]["expose"]
+    assert all(job["metrics_path"] == "/metrics" for job in prometheus["scrape_configs"])
     assert "registry" in compose["volumes"]
+
+
+def _env(container: dict[str, Any]) -> dict[str, Any]:
+    return {item["name"]: item.get("value", item.get("valueFrom")) for item in container["env"]}
+
+
+def test_replicas_and_workers_share_one_bus_and_one_registry() -> None:
+    resources = _resources()
+    (worker,) = resources[("Deployment", "fishloc-sites")]["spec"]["template"]["spec"]["containers"]
+    replica_env, worker_env = _env(_container()), _env(worker)
+    assert replica_env["FISHLOC_SITES_BUS"] == worker_env["FISHLOC_SITES_BUS"]
+    assert replica_env["FISHLOC_DATABASE_URL"] == worker_env["FISHLOC_DATABASE_URL"]
+    redis_service = resources[("Service", "fishloc-redis")]
+    port = redis_service["spec"]["ports"][0]["port"]
+    assert worker_env["FISHLOC_SITES_BUS"] == f"redis://{redis_service['metadata']['name']}:{port}/0"
+    redis_pods = resources[("StatefulSet", "fishloc-redis")]["spec"]["template"]["metadata"]["labels"]
+    assert redis_service["spec"]["selector"].items() <= redis_pods.items()
+    assert worker["args"][0] == "sites" and worker["image"] == _container()["image"]
+    metrics_port = int(worker["args"][worker["args"].index("--metrics-port") + 1])
+    assert worker["ports"][0]["containerPort"] == metrics_port
+    assert worker["securityContext"]["readOnlyRootFilesystem"] is True
+    # No Service selects the workers or Redis by the replicas' labels.
+    localizer = resources[("Service", "fishloc")]["spec"]["selector"]
+    sites_pods = resources[("Deployment", "fishloc-sites")]["spec"]["template"]["metadata"]["labels"]
+    assert not localizer.items() <= sites_pods.items() and not localizer.items() <= redis_pods.items()
+
+
+def test_compose_puts_two_replicas_behind_one_port_and_two_workers_on_the_bus() -> None:
+    compose = yaml.safe_load((DEPLOY / "compose.yaml").read_text(encoding="utf-8"))
+    services = compose["services"]
+    replicas = [name for name, s in services.items()
+                if "command" not in s and s.get("image") == "fishloc:latest"]
+    workers = [name for name, s in services.items() if s.get("command", [None])[0] == "sites"]
+    assert (len(replicas), len(workers)) == (2, 2)
+    for name in replicas + workers:
+        assert services[name]["environment"]["FISHLOC_SITES_BUS"] == "redis://redis:6379/0"
+        assert "registry:/var/lib/fishloc" in services[name]["volumes"]
+    nginx = (DEPLOY / "nginx" / "nginx.conf").read_text(encoding="utf-8")
+    for name in replicas:
+        assert f"server {name}:8000;" in nginx and f"server {name}:50051;" in nginx
+    assert not any(services[name].get("ports") for name in replicas)  # only the proxy publishes
+    published = [port for s in services.values() for port in s.get("ports", [])]
+    assert any(port.endswith(":8000") for port in published)
+    assert any(port.endswith(":50051") for port in published)
 
 
 @pytest.mark.parametrize("source", ["Dockerfile", "compose.yaml", "k8s/deployment.yaml"])

@@ -8,9 +8,8 @@ import sys
 SCRIPT = """
 import sys
 import service.server, service.gateway.client, service.serve_cli, service.gateway.cli, service.grpc.server
-# scipy is a runtime dependency since sites (its assignment solver); matplotlib stays out.
 heavy = sorted({m.split('.')[0] for m in sys.modules} & {'torch', 'onnx', 'onnxscript', 'detector',
-                                                         'exporter', 'matplotlib'})
+                                                         'exporter', 'matplotlib', 'scipy', 'redis'})
 print(','.join(heavy))
 """
 

@@ -20,6 +20,7 @@ from service.core.errors import ApiError
 from service.http.dependencies import ReadAccess, ServiceState, State, WriteAccess
 from service.http.request_body import BodyLimits, read_json_object
 from service.http.schemas import error_responses as _errors
+from service.sites.interface import SitesUnavailableError
 from service.sites.store import SiteNotFoundError
 from service.sites.views import site_to_json
 from sites import LayoutError, line_from_body, zone_from_body
@@ -203,7 +204,10 @@ async def delete_line(state: State, site_id: str = SiteId, line_id: str = LineId
             responses=_errors(401, 404, 422), summary="The fused, tracked people of a site now")
 async def get_occupancy(state: State, site_id: str = SiteId) -> JSONResponse:
     await require_site(state, site_id)
-    occupancy = await run_in_threadpool(state.sites.occupancy, site_id)
+    try:
+        occupancy = await state.sites.read(site_id)
+    except SitesUnavailableError as error:
+        raise ApiError(503, "sites_unavailable", str(error), headers={"Retry-After": "1"}) from None
     return JSONResponse(occupancy, headers={"Cache-Control": "no-store"})
 
 
@@ -223,7 +227,10 @@ def _event(name: str, data: dict[str, Any]) -> str:
 )
 async def site_events(request: Request, state: State, site_id: str = SiteId) -> StreamingResponse:
     await require_site(state, site_id)
-    watcher = await run_in_threadpool(state.sites.watch, site_id, asyncio.get_running_loop())
+    try:
+        watcher = await state.sites.subscribe(site_id)
+    except SitesUnavailableError as error:
+        raise ApiError(503, "sites_unavailable", str(error), headers={"Retry-After": "1"}) from None
 
     async def stream() -> AsyncIterator[str]:
         try:
