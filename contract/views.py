@@ -26,9 +26,15 @@ from numpy.typing import NDArray
 
 from contract.metadata import ModelInfo
 from fisheye import FisheyeCamera, Letterbox
-from fisheye.lens import theta_to_radius
 from fisheye.polar import PolarGrid, unwrap_with_maps
-from fisheye.view_plan import ViewPlan, ViewPlanConfig, ViewReference, plan_view
+from fisheye.view_plan import (
+    ViewPlan,
+    ViewPlanConfig,
+    ViewReference,
+    farthest_corner_px,
+    plan_view,
+    ring_radius_px,
+)
 
 FloatArray = NDArray[np.float64]
 DEFAULT_VIEW = ViewPlanConfig()  # how a planned model's views are planned unless the caller says
@@ -136,13 +142,7 @@ def strip_iou(boxes: NDArray[np.floating], others: NDArray[np.floating]) -> Floa
 def polar_radius_px(camera: FisheyeCamera, max_theta_deg: float) -> float:
     """Frame px from the principal point to the ring θ = min(`max_theta_deg`, the camera's field),
     at most the distance to the frame's farthest corner (nothing lies beyond it)."""
-    theta = math.radians(min(max_theta_deg, camera.theta_max_deg))
-    focal = (camera.focal_px[0] + camera.focal_px[1]) / 2
-    ring = focal * float(theta_to_radius(np.asarray([theta]), camera.kb)[0])
-    width, height = camera.image_size
-    u0, v0 = camera.principal_point
-    corner = max(math.hypot(u - u0, v - v0) for u in (-0.5, width - 0.5) for v in (-0.5, height - 0.5))
-    return min(ring, corner)
+    return min(ring_radius_px(camera, min(max_theta_deg, camera.theta_max_deg)), farthest_corner_px(camera))
 
 
 def polar_grid(info: ModelInfo, camera: FisheyeCamera) -> PolarGrid:
