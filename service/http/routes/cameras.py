@@ -79,6 +79,7 @@ async def put_camera(request: Request, response: Response, state: State,
                      camera_id: str = CameraId) -> dict[str, Any]:
     limits = BodyLimits(_MAX_RECORD_BYTES, state.settings.body_timeout_s)
     record = await read_json_object(request, limits, "a camera record", "invalid_camera")
+    record.pop("view", None)  # what GET adds (the planned view) is the service's, not the camera's
     try:
         candidate = camera_from_dict({**record, "id": record.get("id", camera_id)})
     except CalibrationError as error:

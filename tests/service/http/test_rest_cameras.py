@@ -111,6 +111,10 @@ def test_a_planned_model_reports_each_camera_view(settings_for: Callable[..., Se
         assert [band["scale"] for band in view["bands"]] == [1.0]
         assert any("budget" in note for note in view["notes"])
         assert "view" not in httpx.get(f"{live.url}/v1/cameras").json()["cameras"][0]
+        # A record read back is written back as it is: its view is the service's, not part of it.
+        record = httpx.get(f"{live.url}/v1/cameras/demo").json()
+        assert httpx.put(f"{live.url}/v1/cameras/demo", json=record).status_code == 200
+        assert "view" not in httpx.put(f"{live.url}/v1/cameras/demo", json=record).json()
     with LiveServer(settings_for(model=DEFAULT_MODEL_PATH, max_view_pixels=4_000_000)) as live:
         view = httpx.get(f"{live.url}/v1/cameras/demo").json()["view"]
         assert [band["scale"] for band in view["bands"]] == [1.0, 1.5]
