@@ -60,6 +60,8 @@ def result_to_response(result: DetectionResult, request: pb.DetectRequest) -> pb
     response.model.CopyFrom(pb.ModelRef(**answer["model"]))
     response.detections.extend(detection_from_json(item) for item in answer["detections"])
     response.timing_ms.CopyFrom(pb.Timing(**answer["timing_ms"]))
+    if "site_note" in answer:
+        response.site_note = answer["site_note"]
     return response
 
 
@@ -98,6 +100,8 @@ def response_to_json(response: pb.DetectResponse) -> dict[str, Any]:
                           "inference": timing.inference, "postprocess": timing.postprocess,
                           "total": timing.total},
         }
+        if response.site_note:
+            answer["site_note"] = response.site_note
     return answer
 
 

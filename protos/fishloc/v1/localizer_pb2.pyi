@@ -97,7 +97,7 @@ class Timing(_message.Message):
     def __init__(self, decode: _Optional[float] = ..., preprocess: _Optional[float] = ..., inference: _Optional[float] = ..., postprocess: _Optional[float] = ..., total: _Optional[float] = ...) -> None: ...
 
 class DetectResponse(_message.Message):
-    __slots__ = ("camera_id", "frame_id", "capture_time", "status", "error_code", "error_message", "image", "model", "detections", "timing_ms")
+    __slots__ = ("camera_id", "frame_id", "capture_time", "status", "error_code", "error_message", "image", "model", "detections", "timing_ms", "site_note")
     class Status(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
         __slots__ = ()
         STATUS_UNSPECIFIED: _ClassVar[DetectResponse.Status]
@@ -118,6 +118,7 @@ class DetectResponse(_message.Message):
     MODEL_FIELD_NUMBER: _ClassVar[int]
     DETECTIONS_FIELD_NUMBER: _ClassVar[int]
     TIMING_MS_FIELD_NUMBER: _ClassVar[int]
+    SITE_NOTE_FIELD_NUMBER: _ClassVar[int]
     camera_id: str
     frame_id: str
     capture_time: _timestamp_pb2.Timestamp
@@ -128,7 +129,8 @@ class DetectResponse(_message.Message):
     model: ModelRef
     detections: _containers.RepeatedCompositeFieldContainer[Detection]
     timing_ms: Timing
-    def __init__(self, camera_id: _Optional[str] = ..., frame_id: _Optional[str] = ..., capture_time: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., status: _Optional[_Union[DetectResponse.Status, str]] = ..., error_code: _Optional[str] = ..., error_message: _Optional[str] = ..., image: _Optional[_Union[ImageSize, _Mapping]] = ..., model: _Optional[_Union[ModelRef, _Mapping]] = ..., detections: _Optional[_Iterable[_Union[Detection, _Mapping]]] = ..., timing_ms: _Optional[_Union[Timing, _Mapping]] = ...) -> None: ...
+    site_note: str
+    def __init__(self, camera_id: _Optional[str] = ..., frame_id: _Optional[str] = ..., capture_time: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., status: _Optional[_Union[DetectResponse.Status, str]] = ..., error_code: _Optional[str] = ..., error_message: _Optional[str] = ..., image: _Optional[_Union[ImageSize, _Mapping]] = ..., model: _Optional[_Union[ModelRef, _Mapping]] = ..., detections: _Optional[_Iterable[_Union[Detection, _Mapping]]] = ..., timing_ms: _Optional[_Union[Timing, _Mapping]] = ..., site_note: _Optional[str] = ...) -> None: ...
 
 class SitePose(_message.Message):
     __slots__ = ("x_m", "y_m", "yaw_deg")

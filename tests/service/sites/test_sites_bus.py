@@ -18,10 +18,10 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import grpc
 import httpx
 import pytest
 from bus_processes import (
-    REPO_ROOT,
     FishlocProcess,
     RedisProcess,
     Replica,
@@ -29,6 +29,7 @@ from bus_processes import (
     lease_owners,
     wait_for_leases,
 )
+from service_processes import REPO_ROOT
 from service_sites import SITE, put_site_cameras, walk
 from site_sequences import render_sequence, shipped_model_server
 from test_site_events import _sse_events
@@ -37,6 +38,8 @@ from evaluation.sequence_data import Sequence, read_sequence
 from evaluation.track_playback import ServerClient, install, play_through_server
 from evaluation.track_scoring import Reported, score_sequence
 from fisheye import FisheyeCamera
+from protos.fishloc.v1 import localizer_pb2 as pb
+from protos.fishloc.v1 import localizer_pb2_grpc as pb_grpc
 from service.sites import bus
 
 STEPS = 24
@@ -146,11 +149,24 @@ def _detect(client: httpx.Client, sequence: Sequence, index: int) -> list[dict[s
     return answers
 
 
+def _detect_grpc(port: int, sequence: Sequence, index: int, later_s: float = 0.0) -> list[pb.DetectResponse]:
+    """The frames of step `index`, taken `later_s` after it, through the replica's unary Detect."""
+    step = sequence.steps[index]
+    with grpc.insecure_channel(f"127.0.0.1:{port}") as channel:
+        stub = pb_grpc.LocalizerStub(channel)
+        requests = []
+        for frame in step.frames:
+            request = pb.DetectRequest(camera_id=frame.camera_id, image=frame.path.read_bytes())
+            request.capture_time.FromNanoseconds(round((step.capture_time + later_s) * 1e9))
+            requests.append(request)
+        return [stub.Detect(request, timeout=30) for request in requests]
+
+
 def test_detection_answers_while_redis_is_down_and_the_site_resumes(
         sequence: Sequence, redis_server: RedisProcess, tmp_path: Path) -> None:
     database = tmp_path / "registry.db"
     worker = Worker(redis_server.url, database)
-    replica = Replica(redis_server.url, database, wait_s=5)
+    replica = Replica(redis_server.url, database, wait_s=5, grpc=True)
     site = f"/v1/sites/{sequence.site_id}"
     try:
         worker.start()
@@ -174,6 +190,11 @@ def test_detection_answers_while_redis_is_down_and_the_site_resumes(
                     assert answer["detections"] and all(d["track_id"] is None for d in answer["detections"])
                     assert all(d["site_position_m"] is not None for d in answer["detections"])
                 index += 1
+            # gRPC answers say so too.
+            for response in _detect_grpc(replica.grpc_port, sequence, 2 * third - 1):
+                assert response.status == pb.DetectResponse.Status.OK and response.detections
+                assert response.site_note == "not tracked: the sites bus is unreachable"
+                assert not any(detection.HasField("track_id") for detection in response.detections)
             down = client.get(f"{site}/occupancy")
             assert down.status_code == 503 and down.json()["error"]["code"] == "sites_unavailable"
             assert "unreachable" in down.json()["error"]["message"]
@@ -194,6 +215,10 @@ def test_detection_answers_while_redis_is_down_and_the_site_resumes(
             assert occupancy.status_code == 200
             assert occupancy.json()["time"] == sequence.steps[-1].capture_time
             assert occupancy.json()["count"] > 0
+            # And over gRPC, the last frames again half a second later: tracked, no note.
+            tracked = _detect_grpc(replica.grpc_port, sequence, STEPS - 1, later_s=0.5)
+            assert all(response.site_note == "" for response in tracked)
+            assert any(item.HasField("track_id") for response in tracked for item in response.detections)
     finally:
         for process in (replica, worker):
             if process.process is not None:
