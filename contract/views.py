@@ -116,16 +116,31 @@ class PolarInput:
 
 def strip_nms(boxes: NDArray[np.floating], scores: NDArray[np.floating], iou_threshold: float
               ) -> NDArray[np.int64]:
-    """Indices of (N, 4) `xyxy` strip boxes left by axis-aligned NMS, best first.
+    """Indices of (N, 4) `xyxy` strip boxes left by greedy axis-aligned NMS, best first.
 
-    OpenCV's, in C++: the strip boxes of one person overlap there as their ring segments do in the
-    frame. The frame's rotated NMS then only merges what the strip cannot see, the copies of a
-    person in the overlap columns (and, in a planned view, in two bands)."""
-    if len(scores) == 0:
-        return np.zeros(0, dtype=np.int64)
-    xywh = np.concatenate([boxes[:, :2], boxes[:, 2:] - boxes[:, :2]], axis=1)
-    kept = cv2.dnn.NMSBoxes(xywh.tolist(), np.asarray(scores, dtype=float).tolist(), 0.0, iou_threshold)
-    return np.asarray(kept, dtype=np.int64).reshape(-1)
+    The strip boxes of one person overlap there as their ring segments do in the frame. The frame's
+    rotated NMS then only merges what the strip cannot see, the copies of a person in the overlap
+    columns (and, in a planned view, in two bands). A box is dropped when its IoU with a better
+    kept box exceeds `iou_threshold`. While many candidates are left, each kept box is compared with
+    the survivors only; the last `NMS_MATRIX` are finished on their IoU matrix, so memory stays
+    bounded and a frame's few dozen candidates cost one matrix."""
+    order = np.argsort(-np.asarray(scores, dtype=np.float64), kind="stable")
+    ranked = np.asarray(boxes, dtype=np.float64)[order]
+    keep: list[int] = []
+    while len(order) > NMS_MATRIX:
+        keep.append(int(order[0]))
+        survivors = strip_iou(ranked[:1], ranked[1:])[0] <= iou_threshold
+        order, ranked = order[1:][survivors], ranked[1:][survivors]
+    overlapping = strip_iou(ranked, ranked) > iou_threshold
+    suppressed = np.zeros(len(order), dtype=bool)
+    for row in range(len(order)):
+        if not suppressed[row]:
+            keep.append(int(order[row]))
+            suppressed |= overlapping[row]
+    return np.asarray(keep, dtype=np.int64)
+
+
+NMS_MATRIX = 256  # candidates `strip_nms` finishes on a full IoU matrix
 
 
 def strip_iou(boxes: NDArray[np.floating], others: NDArray[np.floating]) -> FloatArray:

@@ -10,6 +10,7 @@ from polar_double import METADATA
 from contract import ModelError, PolarInput, RawOutputs, parse_metadata, select_detections
 from contract.detect import FOOT_FUSION_IOU, FOOT_FUSION_SCORE
 from contract.metadata import LEGACY_NMS_IOU
+from contract.views import strip_nms
 from detector.metrics import EvalFrame
 from detector.operating_point import choose, sweep
 from fisheye.polar import PolarGrid
@@ -80,3 +81,29 @@ def test_the_operating_point_is_the_nms_iou_and_threshold_of_best_f1() -> None:
     best = points[choose(points)]
     assert best.nms_iou == 0.3 and best.f1 == pytest.approx(1.0) and best.min_score == pytest.approx(0.6)
     assert all(point.f1 < 1.0 for point in points if point.nms_iou >= 0.4)
+
+
+def _greedy_nms(boxes: np.ndarray, scores: np.ndarray, iou_threshold: float) -> list[int]:
+    """The textbook loop, one pair at a time: the reference `strip_nms` must equal."""
+    def iou(a: np.ndarray, b: np.ndarray) -> float:
+        width = max(0.0, min(a[2], b[2]) - max(a[0], b[0]))
+        height = max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
+        inter = width * height
+        return inter / ((a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter)
+
+    kept: list[int] = []
+    for index in sorted(range(len(scores)), key=lambda i: -scores[i]):
+        if all(iou(boxes[index], boxes[other]) <= iou_threshold for other in kept):
+            kept.append(index)
+    return kept
+
+
+@pytest.mark.parametrize("count", [0, 1, 40, 700])  # 700: beyond the matrix, the survivors' loop first
+def test_strip_nms_is_greedy_nms_best_first(count: int) -> None:
+    rng = np.random.default_rng(count)
+    corner = rng.uniform(0, 10 * np.sqrt(count) + 1, (count, 2))  # crowded: some pairs overlap
+    boxes = np.concatenate([corner, corner + rng.uniform(20, 60, (count, 2))], axis=1)
+    scores = rng.choice(np.linspace(0.05, 1.0, 30), count)  # ties: the earlier box ranks first
+    kept = strip_nms(boxes, scores, 0.45)
+    assert kept.tolist() == _greedy_nms(boxes, scores, 0.45)
+    assert 0 < len(kept) < count or count <= 1
