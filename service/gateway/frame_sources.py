@@ -92,6 +92,11 @@ class CaptureSource:
     """
 
     def __init__(self, target: str | int, live: bool, reopen: ReopenPolicy | None = None) -> None:
+        if not hasattr(cv2, "VideoCapture"):
+            raise ValueError(f"cannot open video source {target!r}: this OpenCV has no video input "
+                             "(the service image's is built without it); run the gateway from a pip "
+                             "install, whose opencv-python-headless reads video, or give it a folder "
+                             "of images")
         self.target = target
         self.live = live
         self.reopen = reopen or ReopenPolicy()

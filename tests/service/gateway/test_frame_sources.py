@@ -113,6 +113,20 @@ def test_a_video_file_that_cannot_be_opened_is_refused(tmp_path: Path) -> None:
         open_source(str(clip))
 
 
+def test_an_opencv_without_video_input_is_a_clear_error(monkeypatch: pytest.MonkeyPatch,
+                                                         tmp_path: Path) -> None:
+    """The service image's OpenCV is built without videoio: a video source says so and what to do."""
+    monkeypatch.delattr(cv2, "VideoCapture")
+    clip = tmp_path / "clip.mp4"
+    clip.write_bytes(b"a video")
+    for source in (str(clip), "rtsp://127.0.0.1:1/stream", "0"):
+        with pytest.raises(ValueError, match=r"no video input.*pip install"):
+            open_source(source)
+    (tmp_path / "frames").mkdir()
+    cv2.imwrite(str(tmp_path / "frames" / "a.jpg"), np.zeros((8, 8, 3), np.uint8))
+    assert next(open_source(str(tmp_path / "frames")).frames()).jpeg[:2] == b"\xff\xd8"  # images still read
+
+
 @pytest.mark.parametrize("policy", [
     {"first_backoff_s": 0.0}, {"first_backoff_s": 2.0, "max_backoff_s": 1.0}, {"max_attempts": -1},
 ])
