@@ -8,16 +8,12 @@ The raw client (http.client) sends paths and headers exactly as given: httpx wou
 
 from __future__ import annotations
 
-import collections
 import contextlib
 import datetime
 import http.client
 import ipaddress
 import json
-import os
 import re
-import signal
-import subprocess
 import sys
 import threading
 import time
@@ -39,6 +35,7 @@ for folder in (SERVICE_TESTS, REPO_ROOT):  # REPO_ROOT: when a helper runs as a 
 from service_doubles import save_double_model  # noqa: E402
 from service_frames import encode, person_frame  # noqa: E402
 from service_live_server import LiveServer  # noqa: E402
+from service_processes import FishlocProcess  # noqa: E402
 
 from service.core.config import Settings  # noqa: E402
 
@@ -121,8 +118,8 @@ def raw_request(base_url: str, method: str, path: str, body: bytes = b"",
     return RawResponse(response.status, answer_headers, data, parsed)
 
 
-class ServeProcess:
-    """`fishloc serve` in a child process (what an operator runs), its log lines collected.
+class ServeProcess(FishlocProcess):
+    """`fishloc serve ARGS` in a child process (what an operator runs), its log lines collected.
 
     `start()` waits for the "REST listening" line and reads the port from it; `pid` is the server
     process (for /proc/PID/status and kill -9).
@@ -130,39 +127,21 @@ class ServeProcess:
 
     def __init__(self, args: list[str], env: dict[str, str] | None = None,
                  keep_lines: int | None = None, launcher: list[str] | None = None) -> None:
-        self.args = args
-        self.launcher = launcher or []  # a command that runs the rest of the argv (e.g. unshare)
-        self.env = env or {}
-        self.lines: collections.deque[str] = collections.deque(maxlen=keep_lines)
-        self.process: subprocess.Popen[str] | None = None
+        super().__init__(["serve", *args], env, keep_lines, launcher)
         self.url = ""
-        self._reader: threading.Thread | None = None
         self._listening = threading.Event()
 
-    @property
-    def pid(self) -> int:
-        assert self.process is not None
-        return self.process.pid
+    def on_line(self, line: str) -> None:
+        found = _LISTENING_RE.search(line)
+        if found:
+            self.url = f"{found.group(1)}://127.0.0.1:{found.group(2)}"
+            self._listening.set()
 
-    def _read(self) -> None:
-        assert self.process is not None and self.process.stderr is not None
-        for line in self.process.stderr:
-            self.lines.append(line)
-            found = _LISTENING_RE.search(line)
-            if found:
-                self.url = f"{found.group(1)}://127.0.0.1:{found.group(2)}"
-                self._listening.set()
-        self._listening.set()  # the process ended
+    def on_exit(self) -> None:
+        self._listening.set()
 
     def start(self, timeout_s: float = 60) -> ServeProcess:
-        env = {**os.environ, "PYTHONPATH": str(REPO_ROOT), "FISHLOC_LOG_JSON": "true", **self.env}
-        self.process = subprocess.Popen(
-            [*self.launcher, sys.executable, "-m", "service.cli", "serve", *self.args],
-            cwd=REPO_ROOT, env=env,
-            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-        )
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
+        super().start()
         if not self._listening.wait(timeout_s) or not self.url:
             self.stop()
             raise RuntimeError("fishloc serve did not start:\n" + "".join(list(self.lines)[-30:]))
@@ -176,42 +155,6 @@ class ServeProcess:
                     return
             time.sleep(0.05)
         raise TimeoutError("fishloc serve did not become ready")
-
-    def kill(self) -> None:
-        """SIGKILL: no shutdown code runs."""
-        assert self.process is not None
-        self.process.send_signal(signal.SIGKILL)
-        self.process.wait(30)
-        self._close_pipe()
-
-    def _close_pipe(self) -> None:
-        if self._reader is not None:
-            self._reader.join(30)
-        if self.process is not None and self.process.stderr is not None:
-            self.process.stderr.close()
-
-    def stop(self) -> int:
-        """SIGTERM, then the exit status."""
-        assert self.process is not None
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGTERM)
-        try:
-            code = self.process.wait(60)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
-            code = self.process.wait(30)
-        self._close_pipe()
-        return code
-
-    @property
-    def log(self) -> str:
-        return "".join(self.lines)
-
-    def __enter__(self) -> ServeProcess:
-        return self.start()
-
-    def __exit__(self, *_exc: Any) -> None:
-        self.stop()
 
 
 def serve_args(model_path: Path, database: Path, *extra: str) -> list[str]:
