@@ -31,6 +31,13 @@ start=$SECONDS
 }
 size_mb=$(( $("$DOCKER" image inspect --format '{{.Size}}' "$IMAGE") / 1000000 ))
 echo "docker-smoke: built $IMAGE in $((SECONDS - start)) s, image size ${size_mb} MB"
+# The image's budget (README, "Docker"): a dependency that brings back FFmpeg, BLAS or a test
+# suite shows here, not in a registry bill.
+MAX_MB=${FISHLOC_IMAGE_MAX_MB:-300}
+[ "$size_mb" -le "$MAX_MB" ] || {
+    echo "docker-smoke: FAILED: the image is ${size_mb} MB, over its ${MAX_MB} MB budget" >&2
+    exit 1
+}
 "$DOCKER" run --rm --entrypoint python "$IMAGE" -c \
     "import importlib.util as u, sys; sys.exit(1 if u.find_spec('torch') else 0)" \
     || { echo "docker-smoke: torch is installed in the image" >&2; exit 1; }
