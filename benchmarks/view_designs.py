@@ -78,6 +78,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--data", action="append", required=True, metavar="NAME=ANNOTATIONS",
                         help="an evaluation set (repeat): name=annotations.json")
     parser.add_argument("--limit", type=int, default=None, help="the first N frames of each set")
+    parser.add_argument("--design", action="append", choices=list(DESIGNS), default=None,
+                        help="only this design (repeat; default: every design)")
     parser.add_argument("--threads", type=int, default=2, help="inference threads (default 2)")
     parser.add_argument("--json", type=Path, default=None, help="where to write every figure")
     args = parser.parse_args(argv)
@@ -98,6 +100,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     results: dict[str, dict[str, dict[str, Any]]] = {}
     for design, view in DESIGNS.items():
+        if args.design is not None and design not in args.design:
+            continue
         results[design] = {name: evaluate_design(model, view, frames) for name, frames in sets.items()}
         print(json.dumps({design: results[design]}), file=sys.stderr, flush=True)
     print(markdown_table(results))

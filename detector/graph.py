@@ -16,6 +16,7 @@ from detector.checkpoint import ModelInfo as CheckpointInfo
 from detector.data.dataset import PAD_VALUE
 from detector.decode import decode
 from detector.model import DetectorConfig, FishLocNet
+from detector.nanodet.network import NanoDetPlus
 from detector.yolox.fisheye import FisheyeContract, FisheyeDetectorConfig
 from detector.yolox.network import YoloxNano
 from detector.yolox.polar import PolarContract, PolarDetectorConfig
@@ -57,7 +58,7 @@ def contract_module(checkpoint: Checkpoint, source: str = "<memory>") -> nn.Modu
     """`checkpoint`'s network wrapped to the ONNX contract, in eval mode (a polar network's top K
     taken among its peak cells where its config says `peaks`: `detector.yolox.decode.peak_cells`)."""
     network = checkpoint.build(source)
-    if isinstance(network, YoloxNano) and isinstance(checkpoint.config, PolarDetectorConfig):
+    if isinstance(network, YoloxNano | NanoDetPlus) and isinstance(checkpoint.config, PolarDetectorConfig):
         config = checkpoint.config
         return PolarContract(network, config.max_detections, config.peaks).eval()
     if isinstance(network, YoloxNano) and isinstance(checkpoint.config, FisheyeDetectorConfig):

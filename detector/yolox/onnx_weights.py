@@ -79,16 +79,17 @@ def conv_order(model: YoloxNano) -> list[str]:
     return order
 
 
-def _read_onnx(path: Path) -> onnx.ModelProto:
+def read_onnx(path: Path, expected: str = "YOLOX-Nano's ONNX export") -> onnx.ModelProto:
+    """The ONNX at `path` without external data; PretrainedWeightsError naming it if unreadable."""
     if not path.is_file():
-        raise PretrainedWeightsError(f"{path}: no such file (expected YOLOX-Nano's ONNX export)")
+        raise PretrainedWeightsError(f"{path}: no such file (expected {expected})")
     try:
         return onnx.load(str(path), load_external_data=False)
     except Exception as error:  # protobuf's DecodeError (untyped to mypy), OSError, ...
         raise PretrainedWeightsError(f"{path}: not a readable ONNX file ({error})") from error
 
 
-def _conv_attributes(node: onnx.NodeProto) -> dict[str, list[int] | int | str]:
+def conv_attributes(node: onnx.NodeProto) -> dict[str, list[int] | int | str]:
     attributes = {a.name: onnx.helper.get_attribute_value(a) for a in node.attribute}
     return {
         "kernel_shape": list(attributes.get("kernel_shape", [])),
@@ -100,7 +101,7 @@ def _conv_attributes(node: onnx.NodeProto) -> dict[str, list[int] | int | str]:
     }
 
 
-def _expected_attributes(conv: nn.Conv2d) -> dict[str, list[int] | int | str]:
+def expected_attributes(conv: nn.Conv2d) -> dict[str, list[int] | int | str]:
     assert not isinstance(conv.padding, str), "our blocks always give explicit padding"
     pad_h, pad_w = conv.padding
     return {
@@ -146,7 +147,7 @@ def match_convs(proto: onnx.ModelProto, model: YoloxNano, source: str) -> list[C
             if tuple(tensor.dims) != tuple(parameter.shape):
                 raise PretrainedWeightsError(f"{where}: {name!r} has shape {tuple(tensor.dims)}, "
                                              f"expected {tuple(parameter.shape)}")
-        attributes, expected = _conv_attributes(node), _expected_attributes(conv)
+        attributes, expected = conv_attributes(node), expected_attributes(conv)
         if attributes != expected:
             raise PretrainedWeightsError(f"{where}: attributes {attributes}, expected {expected}")
         matches.append(ConvMatch(weight_name, bias_name, conv_path))
@@ -157,7 +158,7 @@ def yolox_state_dict_from_onnx(path: str | Path, config: YoloxConfig | None = No
     """The state dict of `YoloxNano(config)` (default: Nano, 80 COCO classes) read from the ONNX
     at `path`; complete by construction, every tensor checked against its parameter."""
     path = Path(path)
-    proto = _read_onnx(path)
+    proto = read_onnx(path)
     model = YoloxNano(config)
     initializers = {tensor.name: tensor for tensor in proto.graph.initializer}
     state: dict[str, Tensor] = {}

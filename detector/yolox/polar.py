@@ -14,11 +14,19 @@ import torch
 from torch import Tensor, nn
 
 from contract import BOX_FORMATS, VIEW_POLAR, ModelInfo, PolarSpec
+from detector.nanodet.decode import top_people as nanodet_top_people
+from detector.nanodet.network import NanoDetConfig, NanoDetPlus
 from detector.yolox.decode import top_people
 from detector.yolox.network import DetectorConfigRecord, YoloxNano
 
-ARCH = "yolox-polar"
-LICENCE = "Apache-2.0 (weights from or fine-tuned from YOLOX-Nano, Copyright (c) Megvii Inc.)"
+ARCH = "yolox-polar"  # the checkpoints' name of this config (kept when the network is not YOLOX)
+YOLOX_NANO, NANODET_PLUS_M = "yolox-nano", "nanodet-plus-m"
+NETWORKS = (YOLOX_NANO, NANODET_PLUS_M)
+LICENCES = {
+    YOLOX_NANO: "Apache-2.0 (weights from or fine-tuned from YOLOX-Nano, Copyright (c) Megvii Inc.)",
+    NANODET_PLUS_M: "Apache-2.0 (weights from or fine-tuned from NanoDet-Plus-m, Copyright (c) RangiLyu)",
+}
+LICENCE = LICENCES[YOLOX_NANO]
 PAD_VALUE = 0
 # YOLOX's boxes are in pixel-edge coordinates (pixel i spans [i, i + 1)); FishLoc's pixel centres
 # sit at integers. Training labels add this, the graph takes it away.
@@ -51,8 +59,16 @@ class PolarDetectorConfig(DetectorConfigRecord):
     # whose view the service plans per camera (DESIGN.md's planned views; `fishloc.view_planned`).
     peaks: bool = False
     planned: bool = False
+    # The network that reads the strip: YOLOX-Nano (every FishLoc model up to 0.6) or NanoDet-Plus-m
+    # (`detector.nanodet`: a stronger COCO start, no foot branch, no inner head).
+    network: str = YOLOX_NANO
 
     def __post_init__(self) -> None:
+        if self.network not in NETWORKS:
+            raise ValueError(f"network {self.network!r} is none of {', '.join(NETWORKS)}")
+        if self.network != YOLOX_NANO and (self.foot or self.inner_fraction > 0 or self.num_classes != 1):
+            raise ValueError(f"{self.network} reads the strip with one person class, no foot and no "
+                             "inner head")
         if self.input_size % 32 or (self.polar_width + self.polar_overlap) % 32:
             raise ValueError(f"strip {self.input_size} x ({self.polar_width} + {self.polar_overlap}) px: "
                              "height and total width must be multiples of 32")
@@ -76,12 +92,14 @@ class PolarDetectorConfig(DetectorConfigRecord):
         """The contract metadata of this network's export."""
         return ModelInfo(name=self.model_name, version=version, view=VIEW_POLAR, input_size=self.input_size,
                          pad_value=PAD_VALUE, default_min_score=default_min_score, trained_on=trained_on,
-                         box_format=BOX_FORMATS[VIEW_POLAR], licence=LICENCE,
+                         box_format=BOX_FORMATS[VIEW_POLAR], licence=LICENCES[self.network],
                          polar=PolarSpec(self.polar_width, self.polar_overlap, self.polar_max_theta_deg),
                          planned=self.planned)
 
 
-def build_polar_network(config: PolarDetectorConfig) -> YoloxNano:
+def build_polar_network(config: PolarDetectorConfig) -> YoloxNano | NanoDetPlus:
+    if config.network == NANODET_PLUS_M:
+        return NanoDetPlus(NanoDetConfig(num_classes=config.num_classes))
     if config.inner_fraction > 0:
         from detector.yolox.inner_head import InnerHeadYolox
 
@@ -94,14 +112,18 @@ class PolarContract(nn.Module):
     integers), scores (N, K) float32 descending: objectness x p(person) of the top K cells, and for
     a network with a foot branch `foot` (N, K, 2) strip px."""
 
-    def __init__(self, net: YoloxNano, max_detections: int, peaks: bool = False) -> None:
+    def __init__(self, net: YoloxNano | NanoDetPlus, max_detections: int, peaks: bool = False) -> None:
         super().__init__()
         self.net = net
         self.max_detections = max_detections
         self.peaks = peaks
 
     def forward(self, image: Tensor) -> tuple[Tensor, ...]:
-        cxcywh, scores, foot = top_people(self.net, image, self.max_detections, self.peaks)  # (N, K, 4)
+        foot: Tensor | None = None
+        if isinstance(self.net, NanoDetPlus):
+            cxcywh, scores = nanodet_top_people(self.net, image, self.max_detections, self.peaks)
+        else:
+            cxcywh, scores, foot = top_people(self.net, image, self.max_detections, self.peaks)  # (N, K, 4)
         centre, half = cxcywh[..., :2] - EDGE_TO_CENTRE_PX, cxcywh[..., 2:] / 2
         boxes = torch.cat([centre - half, centre + half], dim=-1)
         if foot is None:
@@ -128,6 +150,8 @@ def init_from_pretrained(path: str, config: YoloxSize) -> YoloxNano:
     from detector.yolox.network import PERSON, keep_classes
     from detector.yolox.onnx_weights import load_yolox_onnx
 
+    if isinstance(config, PolarDetectorConfig) and config.network != YOLOX_NANO:
+        raise ValueError(f"{config.network} starts from its own weights (init_network_from_pretrained)")
     coco = load_yolox_onnx(path)
     if config.num_classes != 1 or (config.depth, config.width) != (coco.config.depth, coco.config.width):
         raise ValueError(f"{path}: the pretrained network is YOLOX depth {coco.config.depth}, width "
@@ -144,3 +168,13 @@ def init_from_pretrained(path: str, config: YoloxSize) -> YoloxNano:
 
         return InnerHeadYolox.from_network(person, config.inner_fraction)
     return person
+
+
+def init_network_from_pretrained(path: str, config: PolarDetectorConfig) -> YoloxNano | NanoDetPlus:
+    """The COCO network of `config.network` read from its ONNX file, cut to the person class
+    (`init_from_pretrained` for YOLOX-Nano); PretrainedWeightsError naming the file if unusable."""
+    if config.network == NANODET_PLUS_M:
+        from detector.nanodet.onnx_weights import load_nanodet_onnx
+
+        return load_nanodet_onnx(path).to_person_only()
+    return init_from_pretrained(path, config)
