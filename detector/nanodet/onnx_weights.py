@@ -24,6 +24,7 @@ from detector.nanodet.blocks import LEAKY_SLOPE, ConvAct
 from detector.nanodet.network import NanoDetConfig, NanoDetPlus
 from detector.yolox.onnx_weights import (
     PretrainedWeightsError,
+    check_complete,
     conv_attributes,
     expected_attributes,
     read_onnx,
@@ -104,11 +105,7 @@ def nanodet_state_dict_from_onnx(path: str | Path, config: NanoDetConfig | None 
                 slope is not None and abs(slope - LEAKY_SLOPE) > 1e-6):
             raise PretrainedWeightsError(f"{where}: activation {slope}, expected "
                                          f"{LEAKY_SLOPE if _activated(model, conv_path) else None}")
-    expected_keys = set(model.state_dict())
-    if set(state) != expected_keys:  # the model holds nothing but convolutions
-        raise PretrainedWeightsError(f"{path}: loaded {len(state)} tensors for {len(expected_keys)} "
-                                     f"parameters; missing {sorted(expected_keys - set(state))[:5]}")
-    return state
+    return check_complete(state, model, path)
 
 
 def load_nanodet_onnx(path: str | Path) -> NanoDetPlus:

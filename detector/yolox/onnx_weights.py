@@ -166,8 +166,14 @@ def yolox_state_dict_from_onnx(path: str | Path, config: YoloxConfig | None = No
         for onnx_name, suffix in ((match.onnx_weight, "weight"), (match.onnx_bias, "bias")):
             array = numpy_helper.to_array(initializers[onnx_name])
             state[f"{match.torch_conv}.{suffix}"] = torch.from_numpy(np.array(array, dtype=np.float32))
+    return check_complete(state, model, path)
+
+
+def check_complete(state: dict[str, Tensor], model: nn.Module, path: Path) -> dict[str, Tensor]:
+    """`state` if it holds every parameter of `model` and nothing else (a network of convolutions
+    alone, read from the ONNX at `path`); PretrainedWeightsError naming the file otherwise."""
     expected = set(model.state_dict())
-    if set(state) != expected:  # the model holds nothing but convolutions
+    if set(state) != expected:
         raise PretrainedWeightsError(f"{path}: loaded {len(state)} tensors for {len(expected)} "
                                      f"parameters; missing {sorted(expected - set(state))[:5]}")
     return state

@@ -20,6 +20,7 @@ from detector.yolox import PretrainedWeightsError
 from detector.yolox.polar import NANODET_PLUS_M, PolarContract, PolarDetectorConfig
 from models import ASSETS_DIR
 from tests.ci_policy import skip_or_fail_in_ci
+from tests.detector.test_yolox_load import smooth_image
 
 SHARED_ONNX = Path(__file__).resolve().parents[2].parent / "shared" / "pretrained" / "nanodet-plus-m_416.onnx"
 SIZE = 416
@@ -38,12 +39,8 @@ def model() -> NanoDetPlus:
 
 
 def smooth_bgr(height: int = SIZE, width: int = SIZE) -> NDArray[np.float32]:
-    """(1, 3, H, W) BGR 0-255: gradients and slow waves, closer to a photograph than noise."""
-    rows, cols = np.mgrid[0:height, 0:width].astype(np.float64)
-    blue = 127.5 + 120 * np.sin(cols / 37.0) * np.cos(rows / 53.0)
-    green = 255 * cols / width * 0.6 + 80 * np.cos((rows + cols) / 29.0) + 40
-    red = 255 * rows / height * 0.7 + 60 * np.sin(np.hypot(rows - height / 3, cols - width / 2) / 17.0)
-    return np.clip(np.stack([blue, green, red])[None], 0, 255).astype(np.float32)
+    """(1, 3, H, W) BGR 0-255, closer to a photograph than noise (the YOLOX tests' image)."""
+    return smooth_image(height, width)
 
 
 def onnx_output(image_bgr: NDArray[np.float32]) -> NDArray[np.float32]:
