@@ -59,6 +59,7 @@ from detector.operating_point import (
 from detector.plots import plot_pe_by_distance, plot_pr_curve
 from fisheye import FisheyeCamera, assumed_camera
 from fisheye.boxes import cepdof_to_corners
+from fisheye.view_plan import ViewPlanConfig
 
 EVAL_MIN_SCORE = 0.05  # detections kept for AP (DESIGN.md, "Datasets"; the PR curve runs down to here)
 
@@ -157,11 +158,12 @@ def eval_frames(predictor: Predictor, frames: Sequence[FrameAnnotations], batch_
 
 
 def choose_operating_point(model: ContractModel, frames: Sequence[FrameAnnotations],
-                           grid: Sequence[float] = NMS_GRID
+                           grid: Sequence[float] = NMS_GRID, view: ViewPlanConfig = DEFAULT_VIEW
                            ) -> tuple[OperatingPoint, Evaluation, list[OperatingPoint]]:
-    """The best-F1 (NMS IoU, threshold) of `model` on validation `frames` (`detector.operating_point`),
-    the evaluation there (its metrics with `min_score` and `nms_iou`), and every IoU's point."""
-    runner = ModelRunner(model)
+    """The best-F1 (NMS IoU, threshold) of `model` on validation `frames` (`detector.operating_point`)
+    in the views `view` plans, the evaluation there (its metrics with `min_score` and `nms_iou`),
+    and every IoU's point."""
+    runner = ModelRunner(model, view=view)
     outputs = runner.outputs((load_rgb(f) for f in frames), [frame_camera(f) for f in frames])
 
     def frames_at(nms_iou: float) -> list[EvalFrame]:
@@ -249,13 +251,13 @@ def run(args: argparse.Namespace) -> int:
     if args.limit is not None:
         frames = frames[:args.limit]
     extra: dict[str, Any] = {}
+    view = DEFAULT_VIEW if args.max_view_pixels is None else dataclasses.replace(
+        DEFAULT_VIEW, max_pixels=args.max_view_pixels)
     if args.operating_point:
-        best, evaluation, points = choose_operating_point(model, frames)
+        best, evaluation, points = choose_operating_point(model, frames, view=view)
         print(json.dumps({"operating_point": describe([best])[0]}))
         extra["operating_points"] = describe(points)
     else:
-        view = DEFAULT_VIEW if args.max_view_pixels is None else dataclasses.replace(
-            DEFAULT_VIEW, max_pixels=args.max_view_pixels)
         predictor = RunnerPredictor(ModelRunner(model, args.nms_iou, view=view))
         if args.min_score is not None:
             predictor.default_min_score = args.min_score
