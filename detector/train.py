@@ -24,12 +24,19 @@ from detector.data.dataset import AugmentConfig
 from detector.data.readers import DatasetFormatError, read_dataset
 from detector.losses import LossConfig
 from detector.model import DetectorConfig, tiny_config
+from detector.nanodet.network import NanoDetPlus
 from detector.trainer import LAST, TrainConfig, Trainer
-from detector.yolox.finetune import STAGES, FinetuneConfig, Finetuner, YoloxDetectorConfig
+from detector.yolox.finetune import NANODET_STAGES, STAGES, FinetuneConfig, Finetuner, YoloxDetectorConfig
 from detector.yolox.fisheye import FisheyeDetectorConfig
 from detector.yolox.frames import FrameAugment
 from detector.yolox.network import YoloxNano
-from detector.yolox.polar import PolarDetectorConfig, init_from_pretrained
+from detector.yolox.polar import (
+    NETWORKS,
+    YOLOX_NANO,
+    PolarDetectorConfig,
+    init_from_pretrained,
+    init_network_from_pretrained,
+)
 from detector.yolox.strips import StripAugment
 
 MODEL_SIZES = {"default": DetectorConfig, "tiny": tiny_config}
@@ -82,7 +89,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                             "with a radius-aligned head (--input-size, default 640)")
     polar.add_argument("--strip", type=int, nargs=3, default=None, metavar=("HEIGHT", "WIDTH", "OVERLAP"),
                        help="strip rows, columns per turn and overlap columns (default 416 1664 128)")
-    polar.add_argument("--freeze", nargs="*", default=None, choices=STAGES,
+    polar.add_argument("--network", choices=NETWORKS, default=YOLOX_NANO,
+                       help="the network of the polar view, started from its COCO ONNX (default yolox-nano; "
+                            "nanodet-plus-m: ../shared/pretrained/nanodet-plus-m_416.onnx, no foot)")
+    polar.add_argument("--freeze", nargs="*", default=None, choices=(*STAGES, *NANODET_STAGES[:1]),
                        help="network stages kept frozen (default: stem dark2 dark3; none: no stage)")
     polar.add_argument("--inner-head", type=float, default=0.0, metavar="FRACTION",
                        help="design (c): a second head for the disc within FRACTION of the strip's "
@@ -158,12 +168,18 @@ def yolox_view(args: argparse.Namespace) -> tuple[YoloxDetectorConfig, StripAugm
         return FisheyeDetectorConfig(**size), FrameAugment(rotation=rotation, flip=flip)
     strip = {} if args.strip is None else dict(zip(("input_size", "polar_width", "polar_overlap"),
                                                    args.strip, strict=True))
+    if args.network != YOLOX_NANO:
+        if args.view == "fisheye" or args.inner_head or args.foot or args.foot_refine or args.foot_neck:
+            raise ValueError(f"--network {args.network} reads the polar view, with no foot or inner head")
+        name = f"fishloc-{args.network}-polar"
+        return (PolarDetectorConfig(**strip, network=args.network, model_name=name),
+                StripAugment(radius_scales=tuple(args.zoom), crop_width=args.crop))
     return (PolarDetectorConfig(**strip, inner_fraction=args.inner_head),
             StripAugment(radius_scales=tuple(args.zoom), crop_width=args.crop))
 
 
 def initial_network(args: argparse.Namespace, model_config: YoloxDetectorConfig
-                    ) -> tuple[YoloxDetectorConfig, YoloxNano]:
+                    ) -> tuple[YoloxDetectorConfig, YoloxNano | NanoDetPlus]:
     """The network `--init-from` starts from and its config: the COCO ONNX's person network in
     `model_config`, or a polar checkpoint's own network and strip; `--foot` adds the foot branch."""
     if Path(args.init_from).suffix.lower() != ".pt":
@@ -173,6 +189,8 @@ def initial_network(args: argparse.Namespace, model_config: YoloxDetectorConfig
             model_config = replace(model_config, foot=True, foot_refine=bool(args.foot_refine),
                                    foot_refine_steps=args.foot_refine_steps or 1,
                                    foot_neck=bool(args.foot_neck))
+        if isinstance(model_config, PolarDetectorConfig) and model_config.network != YOLOX_NANO:
+            return model_config, init_network_from_pretrained(args.init_from, model_config)
         return model_config, init_from_pretrained(args.init_from, model_config)
     checkpoint = load_checkpoint(args.init_from)
     if not isinstance(checkpoint.config, PolarDetectorConfig):
@@ -182,6 +200,10 @@ def initial_network(args: argparse.Namespace, model_config: YoloxDetectorConfig
         raise ValueError(f"{args.init_from} fixes the view and strip; --view, --strip, --inner-head "
                          "and --zoom are options of a start from the COCO ONNX")
     network = checkpoint.build(args.init_from)
+    if isinstance(network, NanoDetPlus):
+        if args.foot or args.foot_refine or args.foot_neck:
+            raise ValueError(f"{args.init_from} holds a NanoDet-Plus, which has no foot branch")
+        return checkpoint.config, network
     if not isinstance(network, YoloxNano):
         raise ValueError(f"{args.init_from} holds no YOLOX network")
     model_config = checkpoint.config

@@ -37,6 +37,8 @@ from detector.checkpoint import (
 from detector.data.readers import FrameAnnotations
 from detector.evaluate import TorchContract, choose_operating_point, json_safe
 from detector.graph import contract_info, contract_module
+from detector.nanodet.loss import NanoDetDetectionLoss, NanoDetLossConfig
+from detector.nanodet.network import NanoDetPlus
 from detector.schedule import restore_rng, rng_state, seed_everything, warmup_cosine
 from detector.trainer import resolve_device
 from detector.yolox.fisheye import ARCH as FISHEYE_ARCH
@@ -60,6 +62,7 @@ BEST = "best.pt"
 TRAINER_KINDS = {POLAR_ARCH: "polar-finetune", FISHEYE_ARCH: "fisheye-finetune"}
 VIEWS = {POLAR_ARCH: "polar", FISHEYE_ARCH: "fisheye"}  # `fishloc train --view`
 STAGES = ("stem", "dark2", "dark3", "dark4", "dark5", "neck", "head", "inner_head")
+NANODET_STAGES = ("backbone", "neck", "head")  # what --freeze names of a NanoDet-Plus
 
 
 @dataclass(frozen=True)
@@ -81,9 +84,10 @@ class FinetuneConfig:
     device: str = "auto"
 
     def __post_init__(self) -> None:
-        unknown = set(self.freeze) - set(STAGES)
+        unknown = set(self.freeze) - set(STAGES) - set(NANODET_STAGES)
         if unknown:
-            raise ValueError(f"freeze: unknown stages {sorted(unknown)}; choose from {', '.join(STAGES)}")
+            raise ValueError(f"freeze: unknown stages {sorted(unknown)}; choose from "
+                             f"{', '.join(STAGES)} (YOLOX) or {', '.join(NANODET_STAGES)} (NanoDet)")
 
 
 YoloxDetectorConfig = PolarDetectorConfig | FisheyeDetectorConfig
@@ -113,17 +117,24 @@ def training_set(model_config: YoloxDetectorConfig, frames: list[FrameAnnotation
     return PolarStripDataset(frames, model_config, augment, seed)
 
 
-def stage_parameters(model: YoloxNano, stage: str) -> list[nn.Parameter]:
+def stage_parameters(model: YoloxNano | NanoDetPlus, stage: str) -> list[nn.Parameter]:
+    """The parameters of one of `model`'s stages (STAGES of YOLOX, NANODET_STAGES of NanoDet);
+    ValueError for a stage the network does not have."""
+    stages = NANODET_STAGES if isinstance(model, NanoDetPlus) else STAGES
+    if stage not in stages:
+        raise ValueError(f"freeze: {type(model).__name__} has no stage {stage!r}; "
+                         f"choose from {', '.join(stages)}")
     owner: nn.Module = model.backbone if stage.startswith(("stem", "dark")) else model
     module = owner.get_submodule(stage)
     return list(module.parameters())
 
 
 class Finetuner:
-    """Fine-tunes `initial` (a person-only YoloxNano of `model_config`, either view) into `out/`."""
+    """Fine-tunes `initial` (a person-only YoloxNano of `model_config`, either view, or a polar
+    NanoDetPlus) into `out/`."""
 
     def __init__(self, model_config: YoloxDetectorConfig, config: FinetuneConfig, out: Path,
-                 initial: YoloxNano, train_frames: list[FrameAnnotations],
+                 initial: YoloxNano | NanoDetPlus, train_frames: list[FrameAnnotations],
                  val_frames: list[FrameAnnotations] | None = None, trained_on: str = "",
                  progress: bool = True) -> None:
         self.model_config = model_config
@@ -132,8 +143,8 @@ class Finetuner:
         self.progress = progress
         self.device = resolve_device(config.device)
         seed_everything(config.seed)
-        model = build_network(model_config)  # a YoloxNano, with an inner head where the config asks
-        if not isinstance(model, YoloxNano):
+        model = build_network(model_config)  # a YoloxNano (inner head where asked) or a NanoDetPlus
+        if not isinstance(model, YoloxNano | NanoDetPlus):
             raise TypeError(f"{model_config.arch} builds a {type(model).__name__}, not a YOLOX network")
         self.model = model
         self.model.load_state_dict(initial.state_dict(), strict=True)
@@ -150,8 +161,10 @@ class Finetuner:
         self.train_set = training_set(model_config, train_frames, config.augment, config.seed)
         self.kind = TRAINER_KINDS[model_config.arch]
         self.val_frames = (val_frames or [])[:config.val_limit]
-        self.loss = PolarDetectionLoss(PolarLossConfig(iou_weight=config.iou_weight,
-                                                       distill_weight=config.distill))
+        self.loss: PolarDetectionLoss | NanoDetDetectionLoss = (
+            NanoDetDetectionLoss(NanoDetLossConfig(distill_weight=config.distill))
+            if isinstance(self.model, NanoDetPlus) else
+            PolarDetectionLoss(PolarLossConfig(iou_weight=config.iou_weight, distill_weight=config.distill)))
         self.steps_per_epoch = max(1, math.ceil(len(train_frames) / config.batch_size))
         total = self.steps_per_epoch * config.epochs
         self.scheduler = torch.optim.lr_scheduler.LambdaLR(
@@ -233,14 +246,15 @@ class Finetuner:
         if self.config.distill > 0:
             with torch.no_grad():
                 teacher_maps = self.teacher(images)
-        feet = collate_feet(samples) if self.model.foot is not None else None
-        if feet is not None:
-            maps, offsets, fine = self.model.forward_with_foot(images)
-            foot = self.model.foot
-            refine = (fine, foot) if foot is not None and foot.refiner is not None else None
-            terms = self.loss(maps, labels, teacher_maps, offsets, feet, refine)
+        model, loss = self.model, self.loss
+        if isinstance(model, YoloxNano) and model.foot is not None and isinstance(loss, PolarDetectionLoss):
+            feet = collate_feet(samples)
+            maps, offsets, fine = model.forward_with_foot(images)
+            foot = model.foot
+            refine = (fine, foot) if foot.refiner is not None else None
+            terms = loss(maps, labels, teacher_maps, offsets, feet, refine)
         else:
-            terms = self.loss(self.model(images), labels, teacher_maps)
+            terms = loss(model(images), labels, teacher_maps)
         self.optimizer.zero_grad(set_to_none=True)
         if terms["total"].requires_grad:  # not when only the foot trains and no label has a floor point
             terms["total"].backward()

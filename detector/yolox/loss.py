@@ -58,20 +58,25 @@ class Anchors:
     cells_xy: Tensor
 
 
-def anchors_of(maps: Sequence[Tensor]) -> Anchors:
+def anchors_of(maps: Sequence[Tensor], strides_of_levels: Sequence[int] = STRIDES,
+               centre_offset: float = 0.5) -> Anchors:
+    """The cells of `maps` (one per level of `strides_of_levels`); a cell's centre is (col, row) +
+    `centre_offset`, times its stride (YOLOX: half a cell; NanoDet: none)."""
     centres, strides, levels, cells = [], [], [], []
-    for level, (m, stride) in enumerate(zip(maps, STRIDES, strict=True)):
+    for level, (m, stride) in enumerate(zip(maps, strides_of_levels, strict=True)):
         _, _, h, w = m.shape
         grid = cell_grid(h, w, m)  # (h w, 2)
         cells.append(grid)
-        centres.append((grid + 0.5) * stride)
+        centres.append((grid + centre_offset) * stride)
         strides.append(torch.full((h * w,), float(stride), dtype=m.dtype, device=m.device))
         levels.append(torch.full((h * w,), level, dtype=torch.long, device=m.device))
     return Anchors(torch.cat(centres), torch.cat(strides), torch.cat(levels), torch.cat(cells))
 
 
-def assign(anchors: Anchors, labels_xyxy: Tensor, centre_radius: float) -> Tensor:
-    """(A,) index of the label each cell is a positive of, −1 for negatives (module docstring)."""
+def assign(anchors: Anchors, labels_xyxy: Tensor, centre_radius: float,
+           level_ranges_px: Sequence[tuple[float, float]] = LEVEL_RANGES_PX) -> Tensor:
+    """(A,) index of the label each cell is a positive of, −1 for negatives (module docstring);
+    `level_ranges_px` the longer box sides each level takes."""
     count = len(anchors.strides)
     if len(labels_xyxy) == 0:
         return torch.full((count,), -1, dtype=torch.long, device=anchors.strides.device)
@@ -81,7 +86,7 @@ def assign(anchors: Anchors, labels_xyxy: Tensor, centre_radius: float) -> Tenso
     radius = centre_radius * anchors.strides[:, None]
     near = ((x - (x1 + x2) / 2).abs() < radius) & ((y - (y1 + y2) / 2).abs() < radius)
     longer = torch.maximum(x2 - x1, y2 - y1)  # (1, G)
-    ranges = torch.tensor(LEVEL_RANGES_PX, dtype=labels_xyxy.dtype, device=labels_xyxy.device)
+    ranges = torch.tensor(level_ranges_px, dtype=labels_xyxy.dtype, device=labels_xyxy.device)
     low, high = ranges[anchors.levels, 0:1], ranges[anchors.levels, 1:2]  # (A, 1)
     fits = (longer >= low) & (longer < high)  # (A, G)
     candidate = inside & near & fits

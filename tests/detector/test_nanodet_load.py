@@ -27,7 +27,7 @@ SIZE = 416
 PARITY_ATOL = 1e-3  # the file's weights came from fp16; outputs are probabilities and logits
 
 
-def _onnx_path() -> Path:
+def nanodet_onnx_path() -> Path:
     if not SHARED_ONNX.is_file():
         skip_or_fail_in_ci(f"{SHARED_ONNX} is not here (../shared beside the checkout)")
     return SHARED_ONNX
@@ -35,7 +35,7 @@ def _onnx_path() -> Path:
 
 @pytest.fixture(scope="module")
 def model() -> NanoDetPlus:
-    return load_nanodet_onnx(_onnx_path())
+    return load_nanodet_onnx(nanodet_onnx_path())
 
 
 def smooth_bgr(height: int = SIZE, width: int = SIZE) -> NDArray[np.float32]:
@@ -45,7 +45,7 @@ def smooth_bgr(height: int = SIZE, width: int = SIZE) -> NDArray[np.float32]:
 
 def onnx_output(image_bgr: NDArray[np.float32]) -> NDArray[np.float32]:
     """The released file's `output` (3598, 112) for a (1, 3, 416, 416) BGR 0-255 image."""
-    session = ort.InferenceSession(str(_onnx_path()), providers=["CPUExecutionProvider"])
+    session = ort.InferenceSession(str(nanodet_onnx_path()), providers=["CPUExecutionProvider"])
     mean, std = np.array(BGR_MEAN, np.float32), np.array(BGR_STD, np.float32)
     normalised = (image_bgr - mean[:, None, None]) / std[:, None, None]
     return np.asarray(session.run(None, {"data": normalised.astype(np.float32)})[0][0])
@@ -61,7 +61,7 @@ def torch_output(model: NanoDetPlus, image_bgr: NDArray[np.float32]) -> NDArray[
 
 def test_every_convolution_is_loaded_once_in_forward_order(model: NanoDetPlus) -> None:
     order = conv_order(model)
-    nodes = [n for n in onnx.load(str(_onnx_path())).graph.node if n.op_type == "Conv"]
+    nodes = [n for n in onnx.load(str(nanodet_onnx_path())).graph.node if n.op_type == "Conv"]
     assert len(order) == len(nodes) == 110
     assert order[0] == "backbone.stem.conv" and order[-1] == "head.preds.3"
 
@@ -144,7 +144,7 @@ def test_zero_shot_checkpoint_exports_a_planned_graph(tmp_path: Path) -> None:
 
     config = PolarDetectorConfig(input_size=64, polar_width=224, polar_overlap=32, network=NANODET_PLUS_M,
                                  peaks=True, planned=True, max_detections=50)
-    checkpoint = zero_shot_checkpoint(str(_onnx_path()), config, ModelInfo(default_min_score=0.3))
+    checkpoint = zero_shot_checkpoint(str(nanodet_onnx_path()), config, ModelInfo(default_min_score=0.3))
     save_checkpoint(tmp_path / "zero.pt", checkpoint)
     loaded = load_checkpoint(tmp_path / "zero.pt")
     assert loaded.config.network == NANODET_PLUS_M  # type: ignore[union-attr]
