@@ -93,7 +93,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="the network of the polar view, started from its COCO ONNX (default yolox-nano; "
                             "nanodet-plus-m: ../shared/pretrained/nanodet-plus-m_416.onnx, no foot)")
     polar.add_argument("--freeze", nargs="*", default=None, choices=(*STAGES, *NANODET_STAGES[:1]),
-                       help="network stages kept frozen (default: stem dark2 dark3; none: no stage)")
+                       help="network stages kept frozen (default: stem dark2 dark3, NanoDet's backbone; "
+                            "none: no stage)")
     polar.add_argument("--inner-head", type=float, default=0.0, metavar="FRACTION",
                        help="design (c): a second head for the disc within FRACTION of the strip's "
                             "radius (e.g. 0.3); train it alone with --freeze stem dark2 dark3 dark4 dark5 "
@@ -178,6 +179,11 @@ def yolox_view(args: argparse.Namespace) -> tuple[YoloxDetectorConfig, StripAugm
             StripAugment(radius_scales=tuple(args.zoom), crop_width=args.crop))
 
 
+def default_freeze(network: str) -> tuple[str, ...]:
+    """The stages `--freeze` keeps frozen when not given: YOLOX's first three, NanoDet's backbone."""
+    return FinetuneConfig().freeze if network == YOLOX_NANO else NANODET_STAGES[:1]
+
+
 def initial_network(args: argparse.Namespace, model_config: YoloxDetectorConfig
                     ) -> tuple[YoloxDetectorConfig, YoloxNano | NanoDetPlus]:
     """The network `--init-from` starts from and its config: the COCO ONNX's person network in
@@ -231,7 +237,7 @@ def run_polar(args: argparse.Namespace) -> int:
         config = FinetuneConfig(
             epochs=defaults.epochs if args.epochs is None else args.epochs,
             batch_size=args.batch_size or defaults.batch_size, lr=args.lr or defaults.lr,
-            freeze=defaults.freeze if args.freeze is None else tuple(args.freeze),
+            freeze=default_freeze(args.network) if args.freeze is None else tuple(args.freeze),
             distill=defaults.distill if args.distill is None else args.distill,
             checkpoint_every_s=args.checkpoint_every or defaults.checkpoint_every_s,
             seed=args.seed, val_limit=args.val_limit, device=args.device,

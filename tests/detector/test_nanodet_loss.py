@@ -128,3 +128,8 @@ def test_cli_fine_tunes_the_head_alone_and_validates(toy_dataset: Callable[..., 
     assert any(not torch.equal(trained.model_state[k], v) for k, v in start.items() if k.startswith("head"))
     assert main(["train", "--init-from", str(onnx_path), "--network", "nanodet-plus-m", "--data", str(data),
                  "--out", str(tmp_path / "bad"), "--quiet", "--foot"]) == 2  # NanoDet has no foot branch
+    # Without --freeze NanoDet's backbone stays frozen (YOLOX's stage names would not fit it).
+    assert main(["train", "--init-from", str(onnx_path), "--network", "nanodet-plus-m", "--data", str(data),
+                 "--out", str(tmp_path / "zero"), "--quiet", "--epochs", "0"]) == 0
+    assert main(["train", "--init-from", str(onnx_path), "--network", "nanodet-plus-m", "--data", str(data),
+                 "--out", str(tmp_path / "stem"), "--quiet", "--freeze", "stem"]) == 2
