@@ -78,7 +78,10 @@ class NanoDetDetectionLoss:
     def __call__(self, maps: Sequence[Tensor], labels_xyxy: Sequence[Tensor],
                  teacher_maps: Sequence[Tensor] | None = None) -> dict[str, Tensor]:
         flat = flatten_maps(maps)  # (B, A, 1 + 4 * BINS)
-        B, A, _ = flat.shape
+        B, A, channels = flat.shape
+        if channels != 1 + 4 * BINS:
+            raise ValueError(f"maps of {channels} channels: the loss trains a person-only NanoDet "
+                             f"(1 + {4 * BINS})")
         anchors = anchors_of(maps, STRIDES, centre_offset=0.0)
         strides = anchors.strides[:, None]  # (A, 1)
         ltrb = distances(flat[..., 1:]) * strides  # (B, A, 4) px
