@@ -109,8 +109,9 @@ def build_polar_network(config: PolarDetectorConfig) -> YoloxNano | NanoDetPlus:
 
 class PolarContract(nn.Module):
     """(N, H, W, 3) uint8 RGB strips -> boxes (N, K, 4) float32 `xyxy` strip px (pixel centres at
-    integers), scores (N, K) float32 descending: objectness x p(person) of the top K cells, and for
-    a network with a foot branch `foot` (N, K, 2) strip px."""
+    integers), scores (N, K) float32 descending: the person scores of the top K cells (YOLOX:
+    objectness x p(person); NanoDet: p(person)), and for a network with a foot branch `foot`
+    (N, K, 2) strip px."""
 
     def __init__(self, net: YoloxNano | NanoDetPlus, max_detections: int, peaks: bool = False) -> None:
         super().__init__()
