@@ -36,7 +36,6 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 from torch import Tensor, nn
-from torch.nn import functional
 
 from detector.yolox.blocks import conv_block
 from fisheye import FisheyeCamera
@@ -111,8 +110,8 @@ class FootRefiner(nn.Module):
 
     The coarse point comes from a cell of the level that owns the person, for a near person a
     stride-32 cell whose regression is a few pixels coarse; the patch reads the stride-8 features
-    at the point itself (bilinear, `grid_sample`, an ONNX `GridSample`). Its last layer starts at
-    zero: an untrained refiner returns the coarse point."""
+    at the point itself (bilinear: `sample_bilinear`). Its last layer starts at zero: an untrained
+    refiner returns the coarse point."""
 
     def __init__(self, width: int, hidden: int = 128) -> None:
         super().__init__()
@@ -127,22 +126,45 @@ class FootRefiner(nn.Module):
 
     def patches(self, fine_features: Tensor, points: Tensor) -> Tensor:
         """(B, C, h, w) stride-8 features, (B, K, 2) px points -> (B, K, C, S²) samples about them."""
-        _, _, height, width = fine_features.shape
         pattern = self.get_buffer("pattern")  # (S², 2) px about the point
         where = points[:, :, None, :] + pattern  # (B, K, S², 2) px, YOLOX edge coordinates
-        # Tensor times the map's size keeps the size symbolic in an export of any height and width
-        # (a Python float of it would be baked in at the traced size).
-        one = where.new_ones(())
-        extent = torch.stack([one * (width * REFINE_STRIDE), one * (height * REFINE_STRIDE)])  # (2,) px
-        grid = where / extent * 2.0 - 1.0  # align_corners=False: -1 and 1 are the map's outer edges
-        sampled = functional.grid_sample(fine_features, grid, mode="bilinear", padding_mode="border",
-                                         align_corners=False)  # (B, C, K, S²)
-        return sampled.permute(0, 2, 1, 3)
+        return sample_bilinear(fine_features, where, REFINE_STRIDE).transpose(2, 3)
+
 
     def forward(self, fine_features: Tensor, points: Tensor) -> Tensor:
         batch, count = points.shape[:2]
         flat = self.patches(fine_features, points).reshape(batch, count, -1)  # (B, K, C S²)
         return points + self.mlp(flat) * REFINE_SCALE_PX
+
+
+def sample_bilinear(features: Tensor, points: Tensor, stride: int) -> Tensor:
+    """(B, C, h, w) features of a level of `stride`, (B, K, S, 2) points (x, y) in input px (YOLOX
+    edge coordinates: cell i spans [i s, (i + 1) s), its value at its centre) -> (B, K, S, C), each
+    the bilinear mix of the four cells about the point; past the map's last centres a point reads
+    its border (`grid_sample(..., padding_mode="border", align_corners=False)`, the same numbers).
+
+    Four row gathers from the features laid out (B h w, C): onnxruntime runs them 2.5-3x faster
+    than its GridSample, which recomputes each point's weights for every channel (measured at
+    300 x 25 points of 64 channels: 2.3 against 7.4 ms)."""
+    batch, channels, height, width = features.shape
+    # Sizes as tensors, so that an export of any height and width keeps them symbolic.
+    one = points.new_ones(())
+    last_x, last_y, row = one * (width - 1), one * (height - 1), one * width
+    x = (points[..., 0] / stride - 0.5).clamp(min=0.0 * one, max=last_x)  # cell index, centres at integers
+    y = (points[..., 1] / stride - 0.5).clamp(min=0.0 * one, max=last_y)
+    x0, y0 = x.floor(), y.floor()
+    x1, y1 = torch.minimum(x0 + 1, last_x), torch.minimum(y0 + 1, last_y)
+    fx, fy = (x - x0)[..., None], (y - y0)[..., None]  # (B, K, S, 1)
+    rows = features.permute(0, 2, 3, 1).reshape(-1, channels)  # (B h w, C)
+    first = (torch.arange(batch, device=features.device, dtype=points.dtype) * (one * height) * row
+             ).reshape(-1, 1, 1)  # (B, 1, 1) the row of each image's first cell
+
+    def at(cell_y: Tensor, cell_x: Tensor) -> Tensor:
+        index = (first + cell_y * row + cell_x).long().reshape(-1)
+        return rows[index].reshape(*points.shape[:-1], channels)
+
+    return (at(y0, x0) * ((1 - fx) * (1 - fy)) + at(y0, x1) * (fx * (1 - fy))
+            + at(y1, x0) * ((1 - fx) * fy) + at(y1, x1) * (fx * fy))
 
 
 def foot_from_offsets(offsets: Tensor, cxcywh: Tensor) -> Tensor:

@@ -328,3 +328,26 @@ def test_metrics_place_people_by_the_predicted_foot() -> None:
     assert metrics["mPE_box_side"] > 0.1 and metrics["mPE_center"] > metrics["mPE_box_side"]
     without = compute_metrics([dataclasses.replace(frame, det_foot_px=None)], 0.5)
     assert without["mPE"] == without["mPE_box_side"]
+
+
+@pytest.mark.parametrize("batch", [1, 3])
+def test_bilinear_samples_are_grid_samples_border_padding(batch: int) -> None:
+    from torch.nn import functional
+
+    from detector.yolox.foot import sample_bilinear
+
+    torch.manual_seed(4)
+    features = torch.randn(batch, 5, 7, 11)
+    points = torch.rand(batch, 6, 9, 2) * torch.tensor([11.0, 7.0]) * 8 * 1.4 - 12  # inside, past every edge
+    points[0, 0, 0] = torch.tensor([4.0, 4.0])  # the first cell's centre
+    points[0, 0, 1] = torch.tensor([88.0, 56.0])  # the far corner
+    grid = points / torch.tensor([11.0 * 8, 7.0 * 8]) * 2 - 1
+    expected = functional.grid_sample(features, grid, mode="bilinear", padding_mode="border",
+                                      align_corners=False).permute(0, 2, 3, 1)  # (B, K, S, C)
+    torch.testing.assert_close(sample_bilinear(features, points, 8), expected, atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(sample_bilinear(features, points, 8)[0, 0, 0], features[0, :, 0, 0])
+    # the gradient reaches the features and the points, as grid_sample's does
+    points.requires_grad_(True)
+    features.requires_grad_(True)
+    sample_bilinear(features, points, 8).sum().backward()
+    assert features.grad is not None and points.grad is not None and points.grad.abs().sum() > 0

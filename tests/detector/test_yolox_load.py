@@ -126,7 +126,9 @@ def test_onnx_convs_map_to_the_torch_convs_in_forward_order(model: YoloxNano) ->
     finally:
         for hook in hooks:
             hook.remove()
-    assert ran == conv_order(model)
+    # the stem's conv runs as its strided form (Focus.forward), through its weight, not its module
+    assert ran == [name for name in conv_order(model) if name != "backbone.stem.conv.conv"]
+    assert conv_order(model)[0] == "backbone.stem.conv.conv"
 
 
 # (b) any input size that is a multiple of 32
@@ -223,3 +225,21 @@ def test_bad_files_raise_naming_the_file(tmp_path: Path, make_file: Callable[[Pa
     with pytest.raises(PretrainedWeightsError, match=re.escape(str(path))) as caught:
         load_yolox_onnx(path)
     assert isinstance(caught.value, ValueError)
+
+
+@pytest.mark.parametrize("kernel_size", [1, 3])
+def test_focus_runs_as_one_strided_convolution_with_the_block_stem_s_sums(kernel_size: int) -> None:
+    from detector.yolox.blocks import Focus
+
+    torch.manual_seed(2)
+    stem = Focus(3, 8, kernel_size=kernel_size).eval()
+    with torch.no_grad():
+        stem.conv.conv.bias.normal_()
+    image = torch.from_numpy(random_image(64, 96))
+    blocks = torch.cat([image[..., ::2, ::2], image[..., 1::2, ::2], image[..., ::2, 1::2],
+                        image[..., 1::2, 1::2]], dim=1)  # YOLOX's Focus: the 2x2 blocks as channels
+    with torch.no_grad():
+        torch.testing.assert_close(stem(image), stem.conv(blocks), atol=2e-4, rtol=1e-5)
+    # a gradient step sees the same weight whichever way the sums run
+    stem(image).sum().backward()
+    assert stem.conv.conv.weight.grad is not None and stem.conv.conv.weight.grad.abs().sum() > 0
