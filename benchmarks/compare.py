@@ -33,7 +33,7 @@ import numpy as np
 from benchmarks.frames import FrameSet, load_frames
 from benchmarks.machine import machine_info
 from benchmarks.stats import summarize
-from contract import ModelRunner, OnnxModel, SessionThreads, min_decoded_side, prepare_input
+from contract import ModelRunner, OnnxModel, SessionThreads, min_decoded_side, view_inputs
 from contract.views import DEFAULT_VIEW
 from detector.baselines import LetterboxPredictor, RotatedCropsPredictor
 from detector.data.readers import read_dataset
@@ -72,18 +72,18 @@ def _onnx_entry(name: str, path: str, threads: int, view: ViewPlanConfig = DEFAU
     model = OnnxModel(path, SessionThreads(intra_op=threads))
     pipeline = Pipeline(model, PipelineConfig(view=view))
     pipeline.warm_up()
-    inputs: dict[bytes, np.ndarray] = {}
+    inputs: dict[bytes, list[np.ndarray]] = {}
 
-    def model_input(data: bytes, camera: FisheyeCamera) -> np.ndarray:
+    def model_inputs(data: bytes, camera: FisheyeCamera) -> list[np.ndarray]:
         if data not in inputs:
             frame_camera = camera.scaled_to(read_header(data).size_wh)
             frame = decode_frame(data, min_decoded_side(model.info, frame_camera, view), 40_000_000)
-            inputs[data] = prepare_input(model.info, frame.rgb, frame_camera, view)[0]
+            inputs[data] = view_inputs(model.info, frame.rgb, frame_camera, view)[0]
         return inputs[data]
 
     def inference_ms(data: bytes, camera: FisheyeCamera) -> float:
-        image = model_input(data, camera)  # made outside the timed call
-        return _timed(lambda: model.run(image))
+        images = model_inputs(data, camera)  # made outside the timed call
+        return _timed(lambda: [model.run(image) for image in images])
 
     return Entry(name, RunnerPredictor(ModelRunner(model, view=view)),
                  lambda data, camera: _timed(lambda: pipeline.detect(data, camera)), inference_ms)

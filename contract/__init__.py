@@ -9,7 +9,14 @@ this package, so that what is evaluated is exactly what is served:
 - `detect`: score threshold, rotated NMS and the typed per-frame result.
 """
 
-from contract.detect import FrameDetections, ModelRunner, reduce_like_decode, select_detections
+from contract.detect import (
+    FrameDetections,
+    ModelRunner,
+    merge_outputs,
+    reduce_like_decode,
+    select_detections,
+    view_inputs,
+)
 from contract.metadata import (
     BOX_FORMATS,
     VIEW_FISHEYE,
@@ -38,6 +45,7 @@ __all__ = [
     "PolarSpec",
     "RawOutputs",
     "SessionThreads",
+    "merge_outputs",
     "metadata_props",
     "min_decoded_side",
     "parse_metadata",
@@ -45,4 +53,5 @@ __all__ = [
     "prepare_input",
     "reduce_like_decode",
     "select_detections",
+    "view_inputs",
 ]

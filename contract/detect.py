@@ -2,8 +2,9 @@
 
 Score threshold, finite and positive boxes, mapping back to the frame through the view, rotated
 NMS about the camera's principal point, at most `max_detections`. `ModelRunner` chains it with
-`views.prepare_input` for callers that hold decoded frames (evaluation, benchmarks); the service's
-pipeline calls the same two functions between its own decode and localisation.
+`view_inputs` (the view's inputs: `views.prepare_input`, and a planned view's nadir view) and
+`merge_outputs` for callers that hold decoded frames (evaluation, benchmarks); the service's
+pipeline calls the same functions between its own decode and localisation.
 """
 
 from __future__ import annotations
@@ -18,8 +19,15 @@ from numpy.typing import NDArray
 
 from contract.metadata import ModelInfo
 from contract.model import RawOutputs
-from contract.views import DEFAULT_VIEW, InputMapping, min_decoded_side, prepare_input
-from fisheye import FisheyeCamera, rotated_nms
+from contract.views import (
+    DEFAULT_VIEW,
+    InputMapping,
+    PlannedInput,
+    min_decoded_side,
+    nadir_input,
+    prepare_input,
+)
+from fisheye import FisheyeCamera, foot_points, rotated_nms
 from fisheye.view_plan import ViewPlanConfig
 
 FloatArray = NDArray[np.float64]
@@ -69,6 +77,9 @@ def select_detections(raw: RawOutputs, mapping: InputMapping, principal_point: t
                                    boxes[valid], scores[valid], feet[valid])
         foot = mapping.points_to_frame(kept_feet)
     boxes_frame = mapping.boxes_to_frame(kept_boxes)
+    if foot is not None:
+        side = mapping.box_side_feet(kept_boxes)
+        foot[side] = foot_points(boxes_frame[side], principal_point).reshape(-1, 2)
     if nms_iou is not None and len(kept_scores) > 1:
         kept = rotated_nms(boxes_frame, kept_scores, principal_point, nms_iou)[:max_detections]
     else:
@@ -101,6 +112,34 @@ def fused_feet(mapping: InputMapping, boxes: FloatArray, scores: FloatArray, fee
     total = weights.sum(axis=1, keepdims=True)
     fused = weights @ candidate_feet / np.maximum(total, 1e-12)
     return np.asarray(np.where(total > 0, fused, feet), dtype=np.float64)
+
+
+def merge_outputs(raws: Sequence[RawOutputs], mapping: InputMapping) -> RawOutputs:
+    """The outputs of a view's inputs (`view_inputs`) as one: the nadir view's boxes and points
+    moved right of the canvas, to where the planned mapping reads them; scores descending."""
+    if len(raws) == 1:
+        return raws[0]
+    if len(raws) != 2 or not isinstance(mapping, PlannedInput) or mapping.plan.nadir is None:
+        raise ValueError(f"{len(raws)} outputs for a view of one input")
+    canvas, nadir = raws
+    shift = np.float32(mapping.plan.nadir.column)
+    boxes = np.concatenate([canvas.boxes, nadir.boxes + np.array([shift, 0, shift, 0], dtype=np.float32)])
+    scores = np.concatenate([canvas.scores, nadir.scores])
+    foot = None
+    if canvas.foot is not None and nadir.foot is not None:
+        foot = np.concatenate([canvas.foot, nadir.foot + np.array([shift, 0], dtype=np.float32)])
+    order = np.argsort(-scores, kind="stable")
+    return RawOutputs(boxes[order], scores[order], None if foot is None else foot[order])
+
+
+def view_inputs(info: ModelInfo, rgb: NDArray[np.uint8], camera: FisheyeCamera,
+                config: ViewPlanConfig = DEFAULT_VIEW) -> tuple[list[NDArray[np.uint8]], InputMapping]:
+    """Every input a frame of `camera` (decoded as `rgb`, full or reduced scale) makes for the
+    model, each one run, and the mapping of their merged outputs (`merge_outputs`): the view's
+    input (`views.prepare_input`), then its nadir view where the plan has one."""
+    image, mapping = prepare_input(info, rgb, camera, config)
+    nadir = nadir_input(info, rgb, camera, config)
+    return ([image] if nadir is None else [image, nadir]), mapping
 
 
 def reduce_like_decode(rgb: NDArray[np.uint8], min_long_side: int) -> NDArray[np.uint8]:
@@ -155,9 +194,10 @@ class ModelRunner:
         found = []
         for rgb, camera in zip(frames_rgb, cameras, strict=True):
             reduced = reduce_like_decode(rgb, min_decoded_side(info, camera, self.view))
-            image, mapping = prepare_input(info, reduced, camera, self.view)
+            images, mapping = view_inputs(info, reduced, camera, self.view)
             pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
-            found.append(FrameOutputs(self.model.run(image), mapping, pp))
+            raw = merge_outputs([self.model.run(image) for image in images], mapping)
+            found.append(FrameOutputs(raw, mapping, pp))
         return found
 
     def select(self, outputs: Sequence[FrameOutputs], min_score: float, nms_iou: float | None = None

@@ -28,6 +28,7 @@ from contract.metadata import ModelInfo
 from fisheye import FisheyeCamera, Letterbox
 from fisheye.polar import PolarGrid, unwrap_with_maps
 from fisheye.view_plan import (
+    NadirPiece,
     ViewPlan,
     ViewPlanConfig,
     ViewReference,
@@ -67,6 +68,11 @@ class InputMapping(Protocol):
         (the polar strip), else None."""
         ...
 
+    def box_side_feet(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
+        """(N,) which boxes take their foot point from the box side, whatever a `foot` output says
+        (the nadir view's: the network learnt its feet on the strip)."""
+        ...
+
 
 @dataclass(frozen=True)
 class FisheyeInput:
@@ -90,6 +96,9 @@ class FisheyeInput:
     def overlaps(self, boxes: NDArray[np.floating], others: NDArray[np.floating]) -> FloatArray | None:
         return None  # radius-aligned boxes turn with their position: their IoU is the frame's polygon one
 
+    def box_side_feet(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
+        return np.zeros(len(boxes), dtype=bool)
+
 
 @dataclass(frozen=True)
 class PolarInput:
@@ -112,6 +121,9 @@ class PolarInput:
 
     def overlaps(self, boxes: NDArray[np.floating], others: NDArray[np.floating]) -> FloatArray | None:
         return strip_iou(boxes, others)
+
+    def box_side_feet(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
+        return np.zeros(len(boxes), dtype=bool)
 
 
 def strip_nms(boxes: NDArray[np.floating], scores: NDArray[np.floating], iou_threshold: float
@@ -191,12 +203,13 @@ def view_plan(info: ModelInfo, camera: FisheyeCamera, config: ViewPlanConfig = D
 def min_decoded_side(info: ModelInfo, camera: FisheyeCamera, config: ViewPlanConfig = DEFAULT_VIEW) -> int:
     """The smallest long side (px) a reduced decode of `camera`'s frame may have for this model:
     the letterbox's side, or for a polar strip one frame pixel per strip row along the radius (for
-    a planned view, per row of its densest band)."""
+    a planned view, per row of its densest band, and per px of its nadir view)."""
     if info.polar is None:
         return info.input_size
     if info.planned:
         plan = view_plan(info, camera, config)
-        return math.ceil(max(camera.image_size) * max(g.px_per_radius_px for g in plan.grids))
+        densest = max([g.px_per_radius_px for g in plan.grids] + ([plan.nadir.scale] if plan.nadir else []))
+        return math.ceil(max(camera.image_size) * densest)
     grid = polar_grid(info, camera)
     return math.ceil(max(camera.image_size) * grid.height / grid.radius_px)
 
@@ -235,9 +248,18 @@ def prepare_input(info: ModelInfo, rgb: NDArray[np.uint8], camera: FisheyeCamera
 @dataclass(frozen=True)
 class PlannedInput:
     """A planned view's mapping (`fisheye.view_plan.ViewPlan`): strips of several rings stacked in
-    one canvas; a box or point belongs to the piece whose rows hold it (a box: its centre)."""
+    one canvas; a box or point belongs to the piece whose rows hold it (a box: its centre). The
+    nadir view's outputs stand right of the canvas, from its `column` on (`contract.detect.
+    merge_outputs` puts them there): there a box is an upright `xyxy` of the crop, read as the
+    radius-aligned box that bounds the ellipse it holds."""
 
     plan: ViewPlan
+
+    def _in_nadir(self, columns: NDArray[np.floating]) -> NDArray[np.bool_]:
+        nadir = self.plan.nadir
+        if nadir is None:
+            return np.zeros(len(columns), dtype=bool)
+        return np.asarray(columns, dtype=np.float64) >= nadir.column - 0.5
 
     def _piece_of(self, rows: NDArray[np.floating]) -> NDArray[np.int64]:
         starts = np.asarray(self.plan.row_offsets, dtype=np.float64)
@@ -258,34 +280,118 @@ class PlannedInput:
             out[chosen] = convert(grid, local)
         return out
 
+    def _nadir_local(self, points: NDArray[np.floating]) -> FloatArray:
+        """(N, 2) px right of the canvas -> (N, 2) px of the nadir view itself."""
+        assert self.plan.nadir is not None
+        return np.asarray(points, dtype=np.float64) - (self.plan.nadir.column, 0.0)
+
     def boxes_to_frame(self, boxes: NDArray[np.floating]) -> FloatArray:
-        centre_rows = (np.asarray(boxes)[:, 1] + np.asarray(boxes)[:, 3]) / 2
-        return self._each_piece(boxes, centre_rows, [1, 3], PolarGrid.polar_to_radius_aligned, 4)
+        xyxy = np.asarray(boxes, dtype=np.float64)
+        nadir = self._in_nadir((xyxy[:, 0] + xyxy[:, 2]) / 2)
+        out = np.zeros((len(xyxy), 4), dtype=np.float64)
+        strip = ~nadir
+        centre_rows = (xyxy[strip, 1] + xyxy[strip, 3]) / 2
+        out[strip] = self._each_piece(xyxy[strip], centre_rows, [1, 3], PolarGrid.polar_to_radius_aligned, 4)
+        if nadir.any():
+            assert self.plan.nadir is not None
+            out[nadir] = upright_to_radius_aligned(self.plan.nadir, self._nadir_local(
+                xyxy[nadir].reshape(-1, 2)).reshape(-1, 4))
+        return out
 
     def points_to_frame(self, points: NDArray[np.floating]) -> FloatArray:
+        uv = np.asarray(points, dtype=np.float64)
+        nadir = self._in_nadir(uv[:, 0])
+        out = np.zeros((len(uv), 2), dtype=np.float64)
         # A point in the padding below a piece belongs to it: feet lie at the bottom of their boxes.
-        return self._each_piece(points, np.asarray(points)[:, 1], [1], PolarGrid.strip_to_frame, 2)
+        out[~nadir] = self._each_piece(uv[~nadir], uv[~nadir, 1], [1], PolarGrid.strip_to_frame, 2)
+        if nadir.any():
+            assert self.plan.nadir is not None
+            out[nadir] = self.plan.nadir.input_to_frame(self._nadir_local(uv[nadir]))
+        return out
 
     def usable(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
         sized = (boxes[:, 2] > boxes[:, 0]) & (boxes[:, 3] > boxes[:, 1])
         xyxy = np.asarray(boxes, dtype=np.float64)
+        nadir = self._in_nadir((xyxy[:, 0] + xyxy[:, 2]) / 2)
         centre_rows = (xyxy[:, 1] + xyxy[:, 3]) / 2
         piece = self._piece_of(centre_rows)
         offsets = np.asarray(self.plan.row_offsets, dtype=np.float64)[piece]
         owned = np.zeros(len(boxes), dtype=bool)
-        for index in np.unique(piece):
-            chosen = piece == index
+        for index in np.unique(piece[~nadir]):
+            chosen = (piece == index) & ~nadir
             centre_px = self.plan.grids[index].row_to_radius_px(centre_rows[chosen] - offsets[chosen])
             low, high = self.plan.owned_px[index]
             owned[chosen] = (centre_px >= low) & (centre_px < high)
+        if nadir.any():
+            owned[nadir] = self._nadir_owned(xyxy[nadir])
         return sized & owned
+
+    def _nadir_owned(self, xyxy: FloatArray) -> NDArray[np.bool_]:
+        """Nadir-view boxes (canvas px) centred within its owned disc and clear of its edges (a
+        person cut by the crop's edge is read whole by the strip)."""
+        nadir = self.plan.nadir
+        assert nadir is not None
+        local = self._nadir_local(xyxy.reshape(-1, 2)).reshape(-1, 4)
+        far_edge = nadir.side - 1 - NADIR_EDGE_PX
+        inside = (local[:, :2] > NADIR_EDGE_PX).all(axis=1) & (local[:, 2:] < far_edge).all(axis=1)
+        centre = nadir.input_to_frame((local[:, :2] + local[:, 2:]) / 2)
+        offset = centre - np.asarray(nadir.centre_px)
+        return inside & (np.hypot(offset[:, 0], offset[:, 1]) < nadir.owned_px)
 
     def presuppress(self, boxes: NDArray[np.floating], scores: NDArray[np.floating],
                     iou_threshold: float) -> NDArray[np.int64]:
-        return strip_nms(boxes, scores, iou_threshold)
+        return strip_nms(boxes, scores, iou_threshold)  # the nadir view's boxes never meet the strip's
 
     def overlaps(self, boxes: NDArray[np.floating], others: NDArray[np.floating]) -> FloatArray | None:
         return strip_iou(boxes, others)
+
+    def box_side_feet(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
+        xyxy = np.asarray(boxes, dtype=np.float64)
+        return self._in_nadir((xyxy[:, 0] + xyxy[:, 2]) / 2)
+
+
+NADIR_EDGE_PX = 2.0  # a nadir-view box this near the crop's edge is a person the crop cuts
+
+
+def upright_to_radius_aligned(nadir: NadirPiece, xyxy: NDArray[np.floating]) -> FloatArray:
+    """(N, 4) upright `xyxy` boxes of the nadir view (its own px) -> (N, 4) radius-aligned
+    `cxcywh` frame px: the box about the same centre that bounds the ellipse the upright box holds
+    (a person seen from above is round more than square; the box bounding the upright box's
+    corners would be up to 1.4x too large on a diagonal ray)."""
+    boxes = np.asarray(xyxy, dtype=np.float64)
+    centre = nadir.input_to_frame((boxes[:, :2] + boxes[:, 2:]) / 2)
+    half_w = (boxes[:, 2] - boxes[:, 0]) / 2 / nadir.scale
+    half_h = (boxes[:, 3] - boxes[:, 1]) / 2 / nadir.scale
+    angle = np.arctan2(centre[:, 1] - nadir.centre_px[1], centre[:, 0] - nadir.centre_px[0])
+    along = 2 * np.hypot(half_w * np.cos(angle), half_h * np.sin(angle))
+    across = 2 * np.hypot(half_w * np.sin(angle), half_h * np.cos(angle))
+    return np.stack([centre[:, 0], centre[:, 1], across, along], axis=1)
+
+
+def nadir_input(info: ModelInfo, rgb: NDArray[np.uint8], camera: FisheyeCamera,
+                config: ViewPlanConfig = DEFAULT_VIEW) -> NDArray[np.uint8] | None:
+    """The nadir view of a frame of `camera` decoded as `rgb` (full or reduced scale), or None
+    where its planned view has none (or the model plans no view)."""
+    if info.polar is None or not info.planned:
+        return None
+    nadir = view_plan(info, camera, config).nadir
+    if nadir is None:
+        return None
+    scale_xy = (rgb.shape[1] / camera.image_size[0], rgb.shape[0] / camera.image_size[1])
+    map_u, map_v = _cached_nadir_maps(nadir, scale_xy)
+    return unwrap_with_maps(rgb, map_u, map_v, info.pad_value)
+
+
+@functools.lru_cache(maxsize=32)
+def _cached_nadir_maps(nadir: NadirPiece, scale_xy: tuple[float, float]) -> tuple[NDArray[Any], NDArray[Any]]:
+    """The nadir view's sampling maps (fixed-point) for a frame resized by `scale_xy`."""
+    ticks = np.arange(nadir.side, dtype=np.float64)
+    columns, rows = np.meshgrid(ticks, ticks)
+    uv = nadir.input_to_frame(np.stack([columns.ravel(), rows.ravel()], axis=1))
+    map_u = ((uv[:, 0] + 0.5) * scale_xy[0] - 0.5).reshape(nadir.side, nadir.side).astype(np.float32)
+    map_v = ((uv[:, 1] + 0.5) * scale_xy[1] - 0.5).reshape(nadir.side, nadir.side).astype(np.float32)
+    fixed_uv, fraction = cv2.convertMaps(map_u, map_v, cv2.CV_16SC2)
+    return np.asarray(fixed_uv), np.asarray(fraction)
 
 
 @functools.lru_cache(maxsize=32)

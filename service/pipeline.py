@@ -22,8 +22,9 @@ from contract import (
     ModelInfo,
     OnnxModel,
     RawOutputs,
+    merge_outputs,
     min_decoded_side,
-    prepare_input,
+    view_inputs,
 )
 from contract import select_detections as select_raw
 from contract.views import DEFAULT_VIEW, view_plan
@@ -125,10 +126,10 @@ class Pipeline:
         frame = decode_frame(data, smallest_side, self.config.max_pixels, header)
         decoded = time.perf_counter()
 
-        image, mapping = prepare_input(self.info, frame.rgb, frame_camera, self.config.view)
+        images, mapping = view_inputs(self.info, frame.rgb, frame_camera, self.config.view)
         preprocessed = time.perf_counter()
 
-        raw = self.model.run(image)
+        raw = merge_outputs([self.model.run(image) for image in images], mapping)
         inferred = time.perf_counter()
 
         kept = self.select(raw, mapping, threshold, frame_camera)

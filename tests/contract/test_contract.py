@@ -174,3 +174,63 @@ def test_an_unplannable_camera_is_a_frame_error(tmp_path: Path, camera_change: d
     with pytest.raises(FrameError) as refused:
         pipeline.detect(data, camera)
     assert refused.value.code == "view_unplannable" and reason in refused.value.message
+
+
+def test_the_nadir_view_reads_a_person_below_the_lens_as_an_upright_crop(tmp_path: Path) -> None:
+    # The double's box lands on the bright disc in the nadir view too; that box comes back centred on
+    # the disc, radius-aligned, its foot on its own side nearest the principal point.
+    from contract.views import upright_to_radius_aligned
+
+    path = save_polar_double(tmp_path / "planned.onnx", foot=True, planned=True)
+    model = OnnxModel(path, SessionThreads(1))
+    camera = camera_from_dict(CAMERA)
+    with_nadir = Pipeline(model, PipelineConfig(view=dataclasses.replace(DEFAULT_VIEW, scales=(1.0,))))
+    plan = with_nadir.plan(camera)
+    assert plan is not None and plan.nadir is not None
+    nadir = plan.nadir
+    data, uv = _person_frame(camera, (0.3, 0.2))  # 38 px from the principal point, inside its owned disc
+    pp = np.asarray(camera.principal_point)
+    assert np.linalg.norm(uv - pp) < nadir.owned_px
+    found = with_nadir.detect(data, camera).detections
+    at = (uv - (pp - nadir.half_px)) * nadir.scale - 0.5  # the disc in the nadir view's own px
+    half_wh = np.array(BOX_WH) / 2
+    expected = upright_to_radius_aligned(nadir, np.concatenate([at - half_wh, at + half_wh])[None])[0]
+    from_nadir = [i for i, box in enumerate(found.cxcywh)
+                  if np.linalg.norm(box[:2] - uv) < 3.0 and np.allclose(box[2:], expected[2:], rtol=0.05)]
+    assert len(from_nadir) == 1
+    box = found.cxcywh[from_nadir[0]]
+    np.testing.assert_allclose(found.foot_px[from_nadir[0]], foot_points(box[None], pp)[0], atol=1e-6)
+    # without the nadir view the strip alone reads the frame: no box of that size
+    strip_only = Pipeline(model, PipelineConfig(view=dataclasses.replace(DEFAULT_VIEW, scales=(1.0,),
+                                                                         nadir_fraction=None)))
+    strip_boxes = strip_only.detect(data, camera).detections.cxcywh
+    assert len(strip_boxes) and all(not np.allclose(b[2:], box[2:], rtol=0.1) for b in strip_boxes)
+
+
+def test_nadir_view_boxes_are_kept_only_inside_its_owned_disc_and_clear_of_its_edges() -> None:
+    from contract import RawOutputs, merge_outputs
+    from contract.views import PlannedInput
+    from fisheye.view_plan import ViewReference, plan_view
+
+    camera = camera_from_dict(CAMERA)
+    plan = plan_view(camera, ViewReference(rows=64, turn_columns=WIDTH, overlap=OVERLAP),
+                     dataclasses.replace(DEFAULT_VIEW, scales=(1.0,)))
+    nadir = plan.nadir
+    assert nadir is not None
+    mapping = PlannedInput(plan)
+    mid, side = (nadir.side - 1) / 2, nadir.side  # input px centres at integers
+    local = np.array([[mid - 4, mid - 4, mid + 4, mid + 4],  # centred on the principal point: kept
+                      [0.0, mid - 4, 8.0, mid + 4],  # on the crop's edge: a cut person, dropped
+                      [side - 12, side - 12, side - 4, side - 4]], dtype=np.float32)  # past the owned disc
+    canvas = RawOutputs(np.array([[10, 10, 20, 30]], np.float32), np.array([0.5], np.float32),
+                        np.array([[15, 30]], np.float32))
+    merged = merge_outputs([canvas, RawOutputs(local, np.array([0.9, 0.8, 0.7], np.float32),
+                                               np.zeros((3, 2), np.float32))], mapping)
+    assert merged.scores.tolist() == pytest.approx([0.9, 0.8, 0.7, 0.5])
+    np.testing.assert_allclose(merged.boxes[0], local[0] + [nadir.column, 0, nadir.column, 0])
+    assert mapping.usable(merged.boxes.astype(np.float64)).tolist()[:3] == [True, False, False]
+    assert mapping.box_side_feet(merged.boxes.astype(np.float64)).tolist() == [True, True, True, False]
+    centre = mapping.boxes_to_frame(merged.boxes[:1].astype(np.float64))[0, :2]
+    np.testing.assert_allclose(centre, camera.principal_point, atol=1e-6)
+    with pytest.raises(ValueError, match="3 outputs"):
+        merge_outputs([canvas, canvas, canvas], mapping)

@@ -104,12 +104,13 @@ def test_cameras_flag_seeds_the_registry(settings_for: Callable[..., Settings], 
 
 def test_a_planned_model_reports_each_camera_view(settings_for: Callable[..., Settings]) -> None:
     # The shipped model plans its views: within the default budget the demo camera keeps the
-    # trained strip; a larger budget gives its rim a band of its own, at 1.5x.
+    # trained strip; a larger budget gives its rim a band of its own, at 1.5x, and a nadir view.
     with LiveServer(settings_for(model=DEFAULT_MODEL_PATH)) as live:
         view = httpx.get(f"{live.url}/v1/cameras/demo").json()["view"]
         assert view["input_wh"] == [1792, 416] and view["cost_ratio"] == pytest.approx(1.0)
         assert [band["scale"] for band in view["bands"]] == [1.0]
         assert any("budget" in note for note in view["notes"])
+        assert view["nadir"] is None and any("no nadir view" in note for note in view["notes"])
         assert "view" not in httpx.get(f"{live.url}/v1/cameras").json()["cameras"][0]
         # A record read back is written back as it is: its view is the service's, not part of it.
         record = httpx.get(f"{live.url}/v1/cameras/demo").json()
@@ -118,7 +119,9 @@ def test_a_planned_model_reports_each_camera_view(settings_for: Callable[..., Se
     with LiveServer(settings_for(model=DEFAULT_MODEL_PATH, max_view_pixels=4_000_000)) as live:
         view = httpx.get(f"{live.url}/v1/cameras/demo").json()["view"]
         assert [band["scale"] for band in view["bands"]] == [1.0, 1.5]
-        assert view["pixels"] == view["input_wh"][0] * view["input_wh"][1] <= 4_000_000
+        # the nadir view is a second input beside the canvas, counted in the same budget
+        assert view["nadir"]["input_wh"] == [576, 576]
+        assert view["pixels"] == view["input_wh"][0] * view["input_wh"][1] + 576 * 576 <= 4_000_000
         assert view["smallest_person"]["along_px"] > 0
 
 
