@@ -45,7 +45,9 @@ async def list_cameras(state: State) -> dict[str, list[dict[str, Any]]]:
             responses=error_responses(404, 422), summary="One camera's calibration record",
             description="With a planned model, `view` is the view planned for the camera's frames: the "
                         "model input (`input_wh`, `pixels`, `cost_ratio` against the trained strip), its "
-                        "bands, the smallest person in input px and where, and notes (a budget that binds).")
+                        "bands, the smallest person in input px and where, its nadir view (`nadir`: the disc "
+                        "below the lens as a second, upright input; null where the budget leaves no room) "
+                        "and notes (a budget that binds).")
 async def get_camera(state: State, camera_id: str = CameraId) -> dict[str, Any]:
     camera = await run_in_threadpool(state.registry.get, camera_id)
     if camera is None:
