@@ -31,19 +31,18 @@ from fisheye.view_plan import ViewPlanConfig
 # The designs compared for 0.6.0: the trained strip, and two bands (the rim at 1.5x) with the inner
 # band over the whole disc or reaching 0.6 of a standing adult past the split, or at 0.75x; then
 # each view with the nadir view beside it (`fisheye.view_plan.NadirPiece`), showing 0.25, 0.3 or
-# 0.35 of the image circle's radius (and the last at 1.25x and 1.5x the strip's scale, not 1.95x).
+# 0.35 of the image circle's radius at 1.25x to 1.95x the strip's radial scale.
 BANDS = dataclasses.replace(DEFAULT_VIEW, max_pixels=4_000_000, nadir_fraction=None)
 DESIGNS: dict[str, ViewPlanConfig] = {
     "strip (one band, 1.0x)": dataclasses.replace(DEFAULT_VIEW, scales=(1.0,), nadir_fraction=None),
     "two bands 1.0x / 1.5x, inner = whole disc": dataclasses.replace(BANDS, band_margin=None),
     "two bands 1.0x / 1.5x, margin 0.6": dataclasses.replace(BANDS, band_margin=0.6),
     "two bands 0.75x / 1.5x, margin 0.6": dataclasses.replace(BANDS, scales=(0.75, 1.5), band_margin=0.6),
-    **{f"strip + nadir view {shown:g}": dataclasses.replace(
-        DEFAULT_VIEW, scales=(1.0,), max_pixels=4_000_000, nadir_view_fraction=shown)
-       for shown in (0.25, 0.3, 0.35)},
-    **{f"strip + nadir view 0.35 at {scale:g}x": dataclasses.replace(
-        DEFAULT_VIEW, scales=(1.0,), max_pixels=4_000_000, nadir_scale=scale) for scale in (1.25, 1.5)},
-    "two bands 1.0x / 1.5x, margin 0.6, + nadir view 0.35": dataclasses.replace(BANDS, nadir_fraction=0.2),
+    **{f"strip + nadir view {shown:g} at {scale:g}x": dataclasses.replace(
+        DEFAULT_VIEW, scales=(1.0,), max_pixels=4_000_000, nadir_view_fraction=shown, nadir_scale=scale)
+       for shown, scale in ((0.25, 1.95), (0.3, 1.95), (0.35, 1.25), (0.35, 1.5), (0.35, 1.95))},
+    **{f"two bands 1.0x / 1.5x, margin 0.6, + nadir view 0.35 at {scale:g}x": dataclasses.replace(
+        BANDS, nadir_fraction=0.2, nadir_scale=scale) for scale in (1.5, 1.95)},
 }
 FIGURES = ("AP50", "precision", "recall", "AP_far", "recall_nadir", "mPE")
 

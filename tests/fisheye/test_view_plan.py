@@ -108,28 +108,28 @@ def test_config_refuses_nonsense(kwargs: dict[str, object]) -> None:
 # the nadir view
 
 def test_a_budget_with_room_adds_the_nadir_view_beside_the_canvas() -> None:
-    config = ViewPlanConfig(max_pixels=1_100_000)
+    config = ViewPlanConfig(max_pixels=1_000_000)
     plan = plan_view(DEMO, config=config)
     nadir = plan.nadir
     assert nadir is not None and len(plan.bands) == 1
     circle = DEMO.image_circle_radius_px()
-    assert nadir.side == 576 and nadir.half_px == pytest.approx(0.35 * circle)
+    assert nadir.side == 448 and nadir.half_px == pytest.approx(0.35 * circle)
     assert nadir.owned_px == pytest.approx(0.2 * circle) and nadir.centre_px == DEMO.principal_point
     assert nadir.column == plan.canvas_wh[0] + 32  # read right of the canvas, past one stride of gap
-    assert plan.pixels == 1792 * 416 + 576 * 576 <= config.max_pixels
+    assert plan.pixels == 1792 * 416 + 448 * 448 <= config.max_pixels
     # its px map to the frame square it shows, edge to edge
-    corners = nadir.input_to_frame(np.array([[-0.5, -0.5], [575.5, 575.5]]))
+    corners = nadir.input_to_frame(np.array([[-0.5, -0.5], [447.5, 447.5]]))
     half = np.array([[-nadir.half_px] * 2, [nadir.half_px] * 2])
     np.testing.assert_allclose(corners, np.array(DEMO.principal_point) + half)
     public = plan.public()["nadir"]
-    assert isinstance(public, dict) and public["input_wh"] == [576, 576]
+    assert isinstance(public, dict) and public["input_wh"] == [448, 448]
     assert not any("nadir" in note for note in plan.notes)
 
 
 def test_the_default_budget_has_no_room_for_the_nadir_view_and_says_so() -> None:
     plan = plan_view(DEMO)
     assert plan.nadir is None and plan.public()["nadir"] is None
-    assert any("no nadir view (576 x 576 px more)" in note for note in plan.notes)
+    assert any("no nadir view (448 x 448 px more)" in note for note in plan.notes)
     off = plan_view(DEMO, config=ViewPlanConfig(max_pixels=4_000_000, nadir_fraction=None))
     assert off.nadir is None and not any("nadir" in note for note in off.notes)
 

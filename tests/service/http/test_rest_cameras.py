@@ -120,8 +120,8 @@ def test_a_planned_model_reports_each_camera_view(settings_for: Callable[..., Se
         view = httpx.get(f"{live.url}/v1/cameras/demo").json()["view"]
         assert [band["scale"] for band in view["bands"]] == [1.0, 1.5]
         # the nadir view is a second input beside the canvas, counted in the same budget
-        assert view["nadir"]["input_wh"] == [576, 576]
-        assert view["pixels"] == view["input_wh"][0] * view["input_wh"][1] + 576 * 576 <= 4_000_000
+        assert view["nadir"]["input_wh"] == [448, 448]
+        assert view["pixels"] == view["input_wh"][0] * view["input_wh"][1] + 448 * 448 <= 4_000_000
         assert view["smallest_person"]["along_px"] > 0
 
 
