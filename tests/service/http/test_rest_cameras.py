@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import httpx
@@ -13,6 +15,8 @@ from service_live_server import LiveServer
 from fisheye import FisheyeCamera, camera_to_dict
 from models import DEFAULT_MODEL_PATH
 from service.core.config import Settings
+
+SAMPLES = Path(__file__).resolve().parents[3] / "samples"
 
 TOKEN = "s3cret-token-for-tests"
 
@@ -122,6 +126,13 @@ def test_a_planned_model_reports_each_camera_view(settings_for: Callable[..., Se
         # the nadir view is a second input beside the canvas, counted in the same budget
         assert view["nadir"]["input_wh"] == [448, 448]
         assert view["pixels"] == view["input_wh"][0] * view["input_wh"][1] + 448 * 448 <= 4_000_000
+        # the served frame runs both inputs and answers the people of the shipped sample
+        sample = (SAMPLES / "000001.jpg").read_bytes()
+        answer = httpx.post(f"{live.url}/v1/cameras/demo/detect", content=sample,
+                            headers={"Content-Type": "image/jpeg"}, timeout=60)
+        assert answer.status_code == 200
+        people = answer.json()["detections"]
+        assert len(people) >= 5 and all(math.isfinite(p["position_m"][0]) for p in people)
         assert view["smallest_person"]["along_px"] > 0
 
 
