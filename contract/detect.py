@@ -138,8 +138,9 @@ def view_inputs(info: ModelInfo, rgb: NDArray[np.uint8], camera: FisheyeCamera,
     model, each one run, and the mapping of their merged outputs (`merge_outputs`): the view's
     input (`views.prepare_input`), then its nadir view where the plan has one."""
     image, mapping = prepare_input(info, rgb, camera, config)
-    nadir = nadir_input(info, rgb, camera, config)
-    return ([image] if nadir is None else [image, nadir]), mapping
+    if isinstance(mapping, PlannedInput) and mapping.plan.nadir is not None:
+        return [image, nadir_input(mapping.plan.nadir, rgb, camera.image_size, info.pad_value)], mapping
+    return [image], mapping
 
 
 def reduce_like_decode(rgb: NDArray[np.uint8], min_long_side: int) -> NDArray[np.uint8]:

@@ -373,18 +373,12 @@ def upright_to_radius_aligned(nadir: NadirPiece, xyxy: NDArray[np.floating]) -> 
     return np.stack([centre[:, 0], centre[:, 1], across, along], axis=1)
 
 
-def nadir_input(info: ModelInfo, rgb: NDArray[np.uint8], camera: FisheyeCamera,
-                config: ViewPlanConfig = DEFAULT_VIEW) -> NDArray[np.uint8] | None:
-    """The nadir view of a frame of `camera` decoded as `rgb` (full or reduced scale), or None
-    where its planned view has none (or the model plans no view)."""
-    if info.polar is None or not info.planned:
-        return None
-    nadir = view_plan(info, camera, config).nadir
-    if nadir is None:
-        return None
-    scale_xy = (rgb.shape[1] / camera.image_size[0], rgb.shape[0] / camera.image_size[1])
+def nadir_input(nadir: NadirPiece, rgb: NDArray[np.uint8], frame_wh: tuple[int, int],
+                pad_value: int) -> NDArray[np.uint8]:
+    """The nadir view `nadir` of a frame of `frame_wh` px decoded as `rgb` (full or reduced scale)."""
+    scale_xy = (rgb.shape[1] / frame_wh[0], rgb.shape[0] / frame_wh[1])
     map_u, map_v = _cached_nadir_maps(nadir, scale_xy)
-    return unwrap_with_maps(rgb, map_u, map_v, info.pad_value)
+    return unwrap_with_maps(rgb, map_u, map_v, pad_value)
 
 
 @functools.lru_cache(maxsize=32)

@@ -130,7 +130,6 @@ class FootRefiner(nn.Module):
         where = points[:, :, None, :] + pattern  # (B, K, S², 2) px, YOLOX edge coordinates
         return sample_bilinear(fine_features, where, REFINE_STRIDE).transpose(2, 3)
 
-
     def forward(self, fine_features: Tensor, points: Tensor) -> Tensor:
         batch, count = points.shape[:2]
         flat = self.patches(fine_features, points).reshape(batch, count, -1)  # (B, K, C S²)

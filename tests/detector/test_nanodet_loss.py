@@ -128,8 +128,14 @@ def test_cli_fine_tunes_the_head_alone_and_validates(toy_dataset: Callable[..., 
     assert any(not torch.equal(trained.model_state[k], v) for k, v in start.items() if k.startswith("head"))
     assert main(["train", "--init-from", str(onnx_path), "--network", "nanodet-plus-m", "--data", str(data),
                  "--out", str(tmp_path / "bad"), "--quiet", "--foot"]) == 2  # NanoDet has no foot branch
-    # Without --freeze NanoDet's backbone stays frozen (YOLOX's stage names would not fit it).
+    # Without --freeze NanoDet's backbone stays frozen and its neck trains (YOLOX's stage names would
+    # not fit it).
     assert main(["train", "--init-from", str(onnx_path), "--network", "nanodet-plus-m", "--data", str(data),
-                 "--out", str(tmp_path / "zero"), "--quiet", "--epochs", "0"]) == 0
+                 "--out", str(tmp_path / "default"), "--quiet", "--threads", "1",
+                 "--strip", "64", "256", "32", "--epochs", "1", "--batch-size", "2"]) == 0
+    defaulted = load_checkpoint(tmp_path / "default" / "last.pt").model_state
+    backbone = [k for k in start if k.startswith("backbone")]
+    assert backbone and all(torch.equal(defaulted[k], start[k]) for k in backbone)
+    assert any(not torch.equal(defaulted[k], v) for k, v in start.items() if k.startswith("neck"))
     assert main(["train", "--init-from", str(onnx_path), "--network", "nanodet-plus-m", "--data", str(data),
                  "--out", str(tmp_path / "stem"), "--quiet", "--freeze", "stem"]) == 2
