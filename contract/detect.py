@@ -9,6 +9,7 @@ pipeline calls the same functions between its own decode and localisation.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
@@ -17,12 +18,13 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from contract.metadata import ModelInfo
+from contract.metadata import ModelInfo, OperatingPoint
 from contract.model import RawOutputs
 from contract.views import (
     DEFAULT_VIEW,
     InputMapping,
     PlannedInput,
+    mapping_layout,
     min_decoded_side,
     nadir_input,
     prepare_input,
@@ -37,12 +39,14 @@ FloatArray = NDArray[np.float64]
 class FrameDetections:
     """Kept detections of one frame: `boxes_cxcywh` (N, 4) frame px radius-aligned about
     `principal_point`, `scores` (N,) descending, `foot_px` (N, 2) frame px of the model's own
-    floor-contact points or None when the model predicts none."""
+    floor-contact points or None when the model predicts none; `view_point` the operating point of
+    the view they were found in (`ModelInfo.point_for`), when known."""
 
     boxes_cxcywh: FloatArray
     scores: FloatArray
     principal_point: tuple[float, float]
     foot_px: FloatArray | None = None
+    view_point: OperatingPoint | None = None
 
     def __post_init__(self) -> None:
         n = len(self.scores)
@@ -178,13 +182,19 @@ class ModelRunner:
     def __init__(self, model: ContractModel, nms_iou: float | None = None, max_detections: int = 300,
                  view: ViewPlanConfig = DEFAULT_VIEW) -> None:
         self.model = model
-        self.nms_iou = model.info.nms_iou if nms_iou is None else nms_iou  # None: the model's own
+        self.nms_iou = nms_iou  # None: the operating point's of each frame's view
         self.max_detections = max_detections
         self.view = view  # how a planned model's views are planned
 
     @property
     def default_min_score(self) -> float:
         return self.model.info.default_min_score
+
+    def point(self, mapping: InputMapping) -> OperatingPoint:
+        """The operating point a frame seen through `mapping` runs at: its view's own
+        (`ModelInfo.point_for`), with this runner's NMS IoU where one was given."""
+        own = self.model.info.point_for(mapping_layout(mapping))
+        return own if self.nms_iou is None else OperatingPoint(own.min_score, self.nms_iou)
 
     def outputs(self, frames_rgb: Iterable[NDArray[np.uint8]], cameras: Sequence[FisheyeCamera]
                 ) -> list[FrameOutputs]:
@@ -203,10 +213,15 @@ class ModelRunner:
 
     def select(self, outputs: Sequence[FrameOutputs], min_score: float, nms_iou: float | None = None
                ) -> list[FrameDetections]:
-        """Raw outputs -> detections at `min_score` and `nms_iou` (default: this runner's)."""
-        iou = self.nms_iou if nms_iou is None else nms_iou
-        return [select_detections(o.raw, o.mapping, o.principal_point, min_score, iou, self.max_detections)
-                for o in outputs]
+        """Raw outputs -> detections at `min_score` and `nms_iou` (default: each view's point's)."""
+        found = []
+        for o in outputs:
+            point = self.point(o.mapping)
+            iou = point.nms_iou if nms_iou is None else nms_iou
+            detections = select_detections(o.raw, o.mapping, o.principal_point, min_score, iou,
+                                           self.max_detections)
+            found.append(dataclasses.replace(detections, view_point=point))
+        return found
 
     def detect(self, frames_rgb: Sequence[NDArray[np.uint8]], cameras: Sequence[FisheyeCamera],
                min_score: float) -> list[FrameDetections]:

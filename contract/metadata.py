@@ -17,17 +17,25 @@ and `input_size` still describe. Without it, a polar model sees the fixed strip.
 `fishloc.default_min_score` and `fishloc.nms_iou` are the model's operating point: the score
 threshold and rotated-NMS IoU chosen together on validation renders (`detector.operating_point`).
 A model without `fishloc.nms_iou` (before 0.3.1) is run at 0.6, the value it was tuned with.
+A planned model may carry its own points for some of the views the service plans
+(`fishloc.view_operating_points`, JSON: `{"2band+nadir": {"min_score": 0.346, "nms_iou": 0.3}}`,
+keyed by `fisheye.view_plan.ViewPlan.layout`), each chosen the same way on renders seen through that
+view; any other view runs at the model's own point.
 """
 
 from __future__ import annotations
 
+import json
 import math
+import re
 from dataclasses import dataclass
 
 VIEW_FISHEYE = "fisheye"
 VIEW_POLAR = "polar"
 BOX_FORMATS = {VIEW_FISHEYE: "cxcywh_radius_aligned", VIEW_POLAR: "xyxy_polar"}
 LEGACY_NMS_IOU = 0.6  # the NMS IoU of a model whose metadata names none
+VIEW_POINTS_KEY = "fishloc.view_operating_points"
+LAYOUT_PATTERN = re.compile(r"[1-9][0-9]*band(\+nadir)?")  # fisheye.view_plan.view_layout's names
 
 
 class ModelError(RuntimeError):
@@ -52,6 +60,19 @@ class PolarSpec:
 
 
 @dataclass(frozen=True)
+class OperatingPoint:
+    """A score threshold and rotated-NMS IoU, chosen together (`detector.operating_point`)."""
+
+    min_score: float
+    nms_iou: float
+
+    def __post_init__(self) -> None:
+        if not (0.0 <= self.min_score <= 1.0 and 0.0 < self.nms_iou <= 1.0):
+            raise ValueError(f"an operating point needs min_score in [0, 1] and nms_iou in (0, 1], "
+                             f"got {self.min_score} and {self.nms_iou}")
+
+
+@dataclass(frozen=True)
 class ModelInfo:
     """The model's `fishloc.*` metadata and where it came from."""
 
@@ -68,6 +89,8 @@ class ModelInfo:
     sha256: str = ""
     nms_iou: float = LEGACY_NMS_IOU
     planned: bool = False  # a polar model whose view the service plans per camera
+    # (layout, point) pairs: a planned view's own operating point (module docstring)
+    view_points: tuple[tuple[str, OperatingPoint], ...] = ()
 
     def __post_init__(self) -> None:
         if self.view not in BOX_FORMATS:
@@ -83,6 +106,19 @@ class ModelInfo:
                 and self.input_size >= 8 and 0.0 < self.nms_iou <= 1.0):
             raise ValueError(f"pad_value {self.pad_value}, default_min_score {self.default_min_score}, "
                              f"nms_iou {self.nms_iou} or input_size {self.input_size} out of range")
+        if self.view_points and not self.planned:
+            raise ValueError("only a planned model has operating points of its views")
+        layouts = [layout for layout, _ in self.view_points]
+        for layout in layouts:
+            if not LAYOUT_PATTERN.fullmatch(layout):
+                raise ValueError(f"unknown view layout {layout!r} (e.g. '1band', '2band+nadir')")
+        if len(set(layouts)) != len(layouts):
+            raise ValueError(f"view layouts named twice: {layouts}")
+
+    def point_for(self, layout: str | None) -> OperatingPoint:
+        """The operating point of a view of `layout` (None: not a planned view): its own where the
+        model has one, else the model's."""
+        return dict(self.view_points).get(layout or "", OperatingPoint(self.default_min_score, self.nms_iou))
 
     @property
     def input_wh(self) -> tuple[int, int]:
@@ -99,6 +135,7 @@ class ModelInfo:
             "trained_on": self.trained_on, "box_format": self.box_format,
             "default_min_score": self.default_min_score, "nms_iou": self.nms_iou,
             "pad_value": self.pad_value, "planned": self.planned,
+            "view_operating_points": view_points_record(self.view_points),
             "licence": self.licence, "sha256": self.sha256,
         }
         if self.polar is not None:
@@ -133,11 +170,35 @@ def parse_metadata(props: dict[str, str], source: str, sha256: str = "") -> Mode
             sha256=sha256,
             nms_iou=float(props.get("fishloc.nms_iou", repr(LEGACY_NMS_IOU))),
             planned=_flag(props.get("fishloc.view_planned", "0"), "fishloc.view_planned"),
+            view_points=parse_view_points(props.get(VIEW_POINTS_KEY, "{}")),
         )
     except KeyError as error:
         raise ModelError(f"{source}: a {view} model needs the metadata {error.args[0]}") from None
     except ValueError as error:
         raise ModelError(f"{source}: unusable fishloc.* metadata: {error}") from None
+
+
+def view_points_record(points: tuple[tuple[str, OperatingPoint], ...]) -> dict[str, dict[str, float]]:
+    """View operating points as their JSON object (`fishloc.view_operating_points`)."""
+    return {layout: {"min_score": p.min_score, "nms_iou": p.nms_iou} for layout, p in points}
+
+
+def parse_view_points(text: str) -> tuple[tuple[str, OperatingPoint], ...]:
+    """`fishloc.view_operating_points` -> (layout, point) pairs; ValueError when malformed (the
+    layouts themselves are checked by ModelInfo)."""
+    try:
+        record = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{VIEW_POINTS_KEY} is not JSON ({error})") from None
+    if not isinstance(record, dict):
+        raise ValueError(f"{VIEW_POINTS_KEY} must be a JSON object of layout -> point")
+    points = []
+    for layout, point in record.items():
+        if not (isinstance(point, dict) and set(point) == {"min_score", "nms_iou"}
+                and all(isinstance(v, int | float) and not isinstance(v, bool) for v in point.values())):
+            raise ValueError(f"{VIEW_POINTS_KEY}[{layout!r}] must be {{\"min_score\": S, \"nms_iou\": I}}")
+        points.append((layout, OperatingPoint(float(point["min_score"]), float(point["nms_iou"]))))
+    return tuple(sorted(points, key=lambda pair: pair[0]))
 
 
 def _flag(value: str, name: str) -> bool:
@@ -167,4 +228,6 @@ def metadata_props(info: ModelInfo) -> dict[str, str]:
         props["fishloc.polar_max_theta_deg"] = repr(float(info.polar.max_theta_deg))
     if info.planned:
         props["fishloc.view_planned"] = "1"
+    if info.view_points:
+        props[VIEW_POINTS_KEY] = json.dumps(view_points_record(info.view_points), sort_keys=True)
     return props

@@ -358,6 +358,11 @@ NADIR_EDGE_PX = 2.0  # a nadir-view box this near the crop's edge is a person th
 NADIR_DECODE_SLACK = 1.5
 
 
+def mapping_layout(mapping: InputMapping) -> str | None:
+    """The layout of a planned view (`ViewPlan.layout`); None for the fixed views."""
+    return mapping.plan.layout if isinstance(mapping, PlannedInput) else None
+
+
 def upright_to_radius_aligned(nadir: NadirPiece, xyxy: NDArray[np.floating]) -> FloatArray:
     """(N, 4) upright `xyxy` boxes of the nadir view (its own px) -> (N, 4) radius-aligned
     `cxcywh` frame px: the box about the same centre that bounds the ellipse the upright box holds

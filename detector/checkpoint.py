@@ -17,7 +17,7 @@ from typing import Any
 import torch
 from torch import nn
 
-from contract.metadata import LEGACY_NMS_IOU
+from contract.metadata import LAYOUT_PATTERN, LEGACY_NMS_IOU, OperatingPoint
 from detector.model import DetectorConfig, build_model
 from detector.yolox.fisheye import ARCH as FISHEYE_ARCH
 from detector.yolox.fisheye import FisheyeDetectorConfig, build_fisheye_network
@@ -42,6 +42,9 @@ class ModelInfo:
     trained_on: str = "untrained"
     default_min_score: float = 0.3
     nms_iou: float = LEGACY_NMS_IOU  # chosen with the threshold (`detector.operating_point`)
+    # a planned model's own points for some view layouts: layout -> [min_score, nms_iou]
+    # (`contract.metadata.ModelInfo.view_points`)
+    view_points: dict[str, list[float]] = field(default_factory=dict)
 
 
 def build_network(config: NetworkConfig) -> nn.Module:
@@ -149,6 +152,25 @@ def save_release(source: str | Path, target: str | Path, info: ModelInfo | None 
     return release
 
 
+def parse_view_point_args(values: list[str]) -> dict[str, list[float]]:
+    """`LAYOUT=SCORE,IOU` arguments -> layout -> [min_score, nms_iou]; CheckpointError naming the
+    argument when one is malformed, names no layout a plan has, or lies out of range."""
+    points: dict[str, list[float]] = {}
+    for value in values:
+        layout, _, numbers = value.partition("=")
+        try:
+            score, iou = (float(x) for x in numbers.split(","))
+            OperatingPoint(score, iou)
+        except ValueError as error:
+            raise CheckpointError(f"--view-point {value!r}: expected LAYOUT=SCORE,IOU with SCORE in [0, 1] "
+                                  f"and IOU in (0, 1], e.g. 2band+nadir=0.346,0.3 ({error})") from None
+        if not LAYOUT_PATTERN.fullmatch(layout):
+            raise CheckpointError(f"--view-point {value!r}: unknown layout {layout!r} "
+                                  "(1band, 2band, each with +nadir)")
+        points[layout] = [score, iou]
+    return points
+
+
 def main(argv: list[str] | None = None) -> int:
     import argparse
 
@@ -159,6 +181,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--trained-on", default=None)
     parser.add_argument("--min-score", type=float, default=None, help="the default score threshold")
     parser.add_argument("--nms-iou", type=float, default=None, help="the rotated NMS IoU")
+    parser.add_argument("--view-point", action="append", default=[], metavar="LAYOUT=SCORE,IOU",
+                        help="the operating point of a planned view layout, e.g. 2band+nadir=0.346,0.3 "
+                             "(chosen with `fishloc eval --operating-point --max-view-pixels N`); repeatable")
     parser.add_argument("--peaks", action="store_true", help="its graph takes the top K among peak cells")
     parser.add_argument("--planned", action="store_true", help="its graph takes planned views (any size)")
     parser.add_argument("--wise-ft", metavar="PRETRAINED_ONNX", default=None,
@@ -172,7 +197,8 @@ def main(argv: list[str] | None = None) -> int:
                          trained_on=args.trained_on or info.trained_on,
                          default_min_score=info.default_min_score if args.min_score is None
                          else args.min_score,
-                         nms_iou=info.nms_iou if args.nms_iou is None else args.nms_iou)
+                         nms_iou=info.nms_iou if args.nms_iou is None else args.nms_iou,
+                         view_points={**info.view_points, **parse_view_point_args(args.view_point)})
         graph = {name: True for name in ("peaks", "planned") if getattr(args, name)}
         shipped = save_release(args.source, args.target, info, graph)
         if args.wise_ft is not None:

@@ -31,6 +31,7 @@ from contract import (
     ModelInfo,
     ModelRunner,
     OnnxModel,
+    OperatingPoint,
     RawOutputs,
     SessionThreads,
 )
@@ -51,7 +52,7 @@ from detector.metrics import (
 )
 from detector.operating_point import (
     NMS_GRID,
-    OperatingPoint,
+    SweptPoint,
     choose,
     describe,
     sweep,
@@ -94,10 +95,13 @@ class RunnerPredictor:
     def __init__(self, runner: ModelRunner) -> None:
         self.runner = runner
         self.default_min_score = runner.default_min_score
+        self.points_used: set[OperatingPoint] = set()  # the operating points of the views it ran
 
     def detect(self, frames_rgb: Sequence[NDArray[np.uint8]], cameras: Sequence[FisheyeCamera],
                min_score: float) -> list[FrameDetections]:
-        return self.runner.detect(frames_rgb, cameras, min_score)
+        found = self.runner.detect(frames_rgb, cameras, min_score)
+        self.points_used.update(d.view_point for d in found if d.view_point is not None)
+        return found
 
 
 def torch_predictor(module: nn.Module, info: ModelInfo) -> RunnerPredictor:
@@ -131,8 +135,12 @@ def _corners_or_none(cxcywha: NDArray[np.float64] | None) -> NDArray[np.float64]
     return None if cxcywha is None else cepdof_to_corners(cxcywha)
 
 
-def eval_frame(frame: FrameAnnotations, detections: FrameDetections) -> EvalFrame:
-    """An annotated frame and its detections -> what the metrics score."""
+def eval_frame(frame: FrameAnnotations, detections: FrameDetections, min_score: float | None = None
+               ) -> EvalFrame:
+    """An annotated frame and its detections -> what the metrics score; its threshold is that of
+    the operating point its view ran at, else `min_score`."""
+    if detections.view_point is not None:
+        min_score = detections.view_point.min_score
     return EvalFrame(
         gt_boxes=frame.boxes_cxcywh, gt_locations_m=frame.locations_m,
         gt_distances_m=frame.distances_m, det_boxes=detections.boxes_cxcywh,
@@ -141,7 +149,7 @@ def eval_frame(frame: FrameAnnotations, detections: FrameDetections) -> EvalFram
         # CEPDOF/WEPDTOF frames are scored against the file's own boxes (DESIGN.md).
         gt_corners=_corners_or_none(frame.file_boxes_cxcywha),
         crowd_corners=_corners_or_none(frame.file_crowd_cxcywha),
-        camera_assumed=frame.camera_assumed, det_foot_px=detections.foot_px)
+        camera_assumed=frame.camera_assumed, det_foot_px=detections.foot_px, min_score=min_score)
 
 
 def eval_frames(predictor: Predictor, frames: Sequence[FrameAnnotations], batch_size: int = 8,
@@ -153,13 +161,14 @@ def eval_frames(predictor: Predictor, frames: Sequence[FrameAnnotations], batch_
         chunk = frames[start:start + batch_size]
         found = predictor.detect([load_rgb(f) for f in chunk], [frame_camera(f) for f in chunk],
                                  EVAL_MIN_SCORE)
-        result.extend(eval_frame(frame, detections) for frame, detections in zip(chunk, found, strict=True))
+        result.extend(eval_frame(frame, detections, predictor.default_min_score)
+                      for frame, detections in zip(chunk, found, strict=True))
     return result
 
 
 def choose_operating_point(model: ContractModel, frames: Sequence[FrameAnnotations],
                            grid: Sequence[float] = NMS_GRID, view: ViewPlanConfig = DEFAULT_VIEW
-                           ) -> tuple[OperatingPoint, Evaluation, list[OperatingPoint]]:
+                           ) -> tuple[SweptPoint, Evaluation, list[SweptPoint]]:
     """The best-F1 (NMS IoU, threshold) of `model` on validation `frames` (`detector.operating_point`)
     in the views `view` plans, the evaluation there (its metrics with `min_score` and `nms_iou`),
     and every IoU's point."""
@@ -177,10 +186,11 @@ def choose_operating_point(model: ContractModel, frames: Sequence[FrameAnnotatio
     return best, Evaluation(evaluated, metrics), points
 
 
-def summarise(frames: Sequence[EvalFrame], min_score: float) -> dict[str, Any]:
-    """Overall metrics plus a `splits` entry per split when there are several."""
+def summarise(frames: Sequence[EvalFrame], min_score: float | None) -> dict[str, Any]:
+    """Overall metrics plus a `splits` entry per split when there are several; precision and recall
+    at `min_score`, or where it is None at each frame's own (`min_score` then lists them)."""
     metrics: dict[str, Any] = dict(compute_metrics(frames, min_score))
-    metrics["min_score"] = min_score
+    metrics["min_score"] = min_score if min_score is not None else sorted({f.min_score for f in frames})
     splits = sorted({f.split for f in frames})
     if len(splits) > 1:
         metrics["splits"] = {name: compute_metrics([f for f in frames if f.split == name], min_score)
@@ -188,10 +198,12 @@ def summarise(frames: Sequence[EvalFrame], min_score: float) -> dict[str, Any]:
     return metrics
 
 
-def evaluate(predictor: Predictor, frames: Sequence[FrameAnnotations], progress: bool = False
-             ) -> Evaluation:
+def evaluate(predictor: Predictor, frames: Sequence[FrameAnnotations], progress: bool = False,
+             min_score: float | None = None) -> Evaluation:
+    """Metrics of `predictor` on `frames`: precision and recall at `min_score`, or (None) at the
+    operating point of each frame's view (`contract.metadata.ModelInfo.point_for`)."""
     evaluated = eval_frames(predictor, frames, progress=progress)
-    return Evaluation(evaluated, summarise(evaluated, predictor.default_min_score))
+    return Evaluation(evaluated, summarise(evaluated, min_score))
 
 
 def write_plots(evaluation: Evaluation, folder: Path, title: str) -> list[Path]:
@@ -259,10 +271,9 @@ def run(args: argparse.Namespace) -> int:
         extra["operating_points"] = describe(points)
     else:
         predictor = RunnerPredictor(ModelRunner(model, args.nms_iou, view=view))
-        if args.min_score is not None:
-            predictor.default_min_score = args.min_score
-        evaluation = evaluate(predictor, frames, progress=True)
-        extra["nms_iou"] = predictor.runner.nms_iou
+        evaluation = evaluate(predictor, frames, progress=True, min_score=args.min_score)
+        ious = sorted({point.nms_iou for point in predictor.points_used})
+        extra["nms_iou"] = ious[0] if len(ious) == 1 else ious
     metrics = json_safe({**evaluation.metrics, **extra, "model": str(args.model), "data": str(args.data),
                          "assumed_camera": args.assumed_camera})
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)

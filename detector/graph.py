@@ -10,7 +10,7 @@ import dataclasses
 
 from torch import Tensor, nn
 
-from contract import BOX_FORMATS, VIEW_FISHEYE, ModelInfo
+from contract import BOX_FORMATS, VIEW_FISHEYE, ModelInfo, OperatingPoint
 from detector.checkpoint import Checkpoint
 from detector.checkpoint import ModelInfo as CheckpointInfo
 from detector.data.dataset import PAD_VALUE
@@ -51,7 +51,9 @@ def contract_info(checkpoint: Checkpoint) -> ModelInfo:
         base = config.model_info(info.model_version, info.trained_on, info.default_min_score)
     else:
         base = centernet_info(config, info)
-    return dataclasses.replace(base, nms_iou=info.nms_iou)
+    points = tuple((layout, OperatingPoint(float(score), float(iou)))
+                   for layout, (score, iou) in sorted(info.view_points.items()))
+    return dataclasses.replace(base, nms_iou=info.nms_iou, view_points=points)
 
 
 def contract_module(checkpoint: Checkpoint, source: str = "<memory>") -> nn.Module:

@@ -67,6 +67,7 @@ class EvalFrame:
     crowd_corners: FloatArray | None = None  # (M, 4, 2)
     camera_assumed: bool = False
     det_foot_px: FloatArray | None = None  # (D, 2): the model's foot points, when it predicts them
+    min_score: float | None = None  # the threshold of the operating point its view runs at
 
     def __post_init__(self) -> None:
         g, d = len(self.gt_boxes), len(self.det_boxes)
@@ -242,12 +243,22 @@ def _mean(values: FloatArray) -> float:
     return float(values.mean()) if len(values) else float("nan")
 
 
-def precision_recall_at(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch], min_score: float
+def _threshold(frame: EvalFrame, min_score: float | None) -> float:
+    """`min_score`, or where it is None the frame's own operating threshold."""
+    if min_score is not None:
+        return min_score
+    if frame.min_score is None:
+        raise ValueError("a frame without its own operating threshold needs a min_score")
+    return frame.min_score
+
+
+def precision_recall_at(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch], min_score: float | None
                         ) -> tuple[float, float]:
+    """Precision and recall (IoU 0.5) at `min_score` (None: each frame's own threshold)."""
     true_pos = n_det = n_gt = 0
     for frame, match in zip(frames, prepared, strict=True):
         matched = greedy_match(match.iou, 0.5)
-        above = (frame.det_scores[match.order] >= min_score) & ~match.ignored(matched, 0.5)
+        above = (frame.det_scores[match.order] >= _threshold(frame, min_score)) & ~match.ignored(matched, 0.5)
         true_pos += int((matched[above] >= 0).sum())
         n_det += int(above.sum())
         n_gt += len(frame.gt_boxes)
@@ -256,10 +267,11 @@ def precision_recall_at(frames: Sequence[EvalFrame], prepared: Sequence[FrameMat
     return precision, recall
 
 
-def nadir_recall(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch], min_score: float) -> float:
-    """Recall at `min_score` (IoU 0.5) of the people below the lens: box centre within
-    NADIR_FRACTION of the image circle's radius, seen from above (frames of calibrated cameras;
-    NaN when there are none)."""
+def nadir_recall(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch], min_score: float | None
+                 ) -> float:
+    """Recall at `min_score` (IoU 0.5; None: each frame's own threshold) of the people below the
+    lens: box centre within NADIR_FRACTION of the image circle's radius, seen from above (frames of
+    calibrated cameras; NaN when there are none)."""
     found = total = 0
     for frame, match in zip(frames, prepared, strict=True):
         if frame.camera is None or frame.camera_assumed or len(frame.gt_boxes) == 0:
@@ -267,7 +279,7 @@ def nadir_recall(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch], mi
         offset = frame.gt_boxes[:, :2] - np.asarray(frame.camera.principal_point)
         below = np.hypot(offset[:, 0], offset[:, 1]) < NADIR_FRACTION * frame.camera.image_circle_radius_px()
         matched = greedy_match(match.iou, 0.5)
-        above = frame.det_scores[match.order] >= min_score
+        above = frame.det_scores[match.order] >= _threshold(frame, min_score)
         hit = np.zeros(len(frame.gt_boxes), dtype=bool)
         hit[matched[above & (matched >= 0)]] = True
         found += int((hit & below).sum())
@@ -294,8 +306,9 @@ def pr_curve(frames: Sequence[EvalFrame]) -> tuple[FloatArray, FloatArray, Float
     return precision, recall, all_scores[order]
 
 
-def compute_metrics(frames: Sequence[EvalFrame], min_score: float) -> dict[str, float]:
-    """Every metric of the module docstring for one set of frames (NaN where undefined)."""
+def compute_metrics(frames: Sequence[EvalFrame], min_score: float | None) -> dict[str, float]:
+    """Every metric of the module docstring for one set of frames (NaN where undefined); precision
+    and recall at `min_score`, or where it is None at each frame's own threshold (`min_score`)."""
     prepared = [_prepare(frame) for frame in frames]
     result: dict[str, float] = _ap_summary(frames, prepared)
     for name, distance_range in DISTANCE_BINS_M.items():

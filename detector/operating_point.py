@@ -29,7 +29,9 @@ NO_DETECTIONS_THRESHOLD = 0.3
 
 
 @dataclass(frozen=True)
-class OperatingPoint:
+class SweptPoint:
+    """One NMS IoU of a sweep with its best-F1 threshold, and what they score there."""
+
     nms_iou: float
     min_score: float
     f1: float
@@ -47,7 +49,7 @@ def best_f1_threshold(frames: Sequence[EvalFrame]) -> float:
     return float(np.clip(scores[int(np.argmax(f1))], *THRESHOLD_RANGE))
 
 
-def sweep(frames_at: Any, grid: Sequence[float] = NMS_GRID) -> list[tuple[OperatingPoint, list[EvalFrame]]]:
+def sweep(frames_at: Any, grid: Sequence[float] = NMS_GRID) -> list[tuple[SweptPoint, list[EvalFrame]]]:
     """`frames_at(nms_iou)` -> EvalFrames for each IoU of `grid` -> each one's best-F1 point."""
     points = []
     for nms_iou in grid:
@@ -56,15 +58,15 @@ def sweep(frames_at: Any, grid: Sequence[float] = NMS_GRID) -> list[tuple[Operat
         metrics = compute_metrics(evaluated, threshold)
         precision, recall = metrics["precision"], metrics["recall"]
         f1 = 2 * precision * recall / max(precision + recall, 1e-9)
-        points.append((OperatingPoint(nms_iou, round(threshold, 3), f1, precision, recall, metrics["AP50"]),
+        points.append((SweptPoint(nms_iou, round(threshold, 3), f1, precision, recall, metrics["AP50"]),
                        evaluated))
     return points
 
 
-def choose(points: Sequence[OperatingPoint]) -> int:
+def choose(points: Sequence[SweptPoint]) -> int:
     """The index of the point of highest F1 (the first of the grid on a tie)."""
     return int(np.argmax([point.f1 for point in points]))
 
 
-def describe(points: Sequence[OperatingPoint]) -> list[dict[str, Any]]:
+def describe(points: Sequence[SweptPoint]) -> list[dict[str, Any]]:
     return [{k: round(v, 4) for k, v in asdict(p).items()} for p in points]

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from torch import nn
 
 from contract import ModelInfo, OnnxModel, SessionThreads, metadata_props
-from detector.checkpoint import Checkpoint, CheckpointError, load_checkpoint
+from detector.checkpoint import Checkpoint, CheckpointError, load_checkpoint, parse_view_point_args
 from detector.graph import contract_info, contract_module
 from detector.yolox.polar import PolarDetectorConfig
 from exporter.parity import ParityReport, check_parity, synthetic_parity_frames
@@ -189,6 +189,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-score", type=float, default=None,
                         help="override fishloc.default_min_score")
     parser.add_argument("--nms-iou", type=float, default=None, help="override fishloc.nms_iou")
+    parser.add_argument("--view-point", action="append", default=[], metavar="LAYOUT=SCORE,IOU",
+                        help="a planned view layout's own operating point, e.g. 2band+nadir=0.346,0.3 "
+                             "(fishloc.view_operating_points); repeatable")
     parser.add_argument("--planned", action="store_true",
                         help="polar graph of any height and width: the service plans each camera's view")
     parser.add_argument("--peaks", action="store_true",
@@ -214,6 +217,7 @@ def run(args: argparse.Namespace) -> int:
     if args.nms_iou is not None:
         info.nms_iou = args.nms_iou
     try:
+        info.view_points = {**info.view_points, **parse_view_point_args(args.view_point)}
         checkpoint.build(args.checkpoint)  # a mismatched checkpoint fails here, with its own message
         calibration = None
         options = GraphOptions(planned=args.planned, peaks=args.peaks)

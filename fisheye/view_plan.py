@@ -183,11 +183,17 @@ class ViewPlan:
         """Input pixels against the trained strip's (the network's cost is about proportional)."""
         return self.pixels / self.reference_pixels
 
+    @property
+    def layout(self) -> str:
+        """What the plan runs, as a model names the views it has an operating point for
+        (`contract.metadata.ModelInfo.view_points`): `1band`, `2band`, each `+nadir` with one."""
+        return view_layout(len(self.bands), self.nadir is not None)
+
     def public(self) -> dict[str, object]:
         """The plan as `GET /v1/cameras/{id}` reports it."""
         return {
             "input_wh": list(self.canvas_wh), "pixels": self.pixels,
-            "cost_ratio": round(self.cost_ratio, 3),
+            "cost_ratio": round(self.cost_ratio, 3), "layout": self.layout,
             "bands": [{"inner_radius_px": round(b.inner_radius_px, 1), "radius_px": round(b.radius_px, 1),
                        "scale": b.scale, "rows": b.rows, "pieces": b.pieces} for b in self.bands],
             "smallest_person": {"along_px": round(self.smallest.along_px, 1),
@@ -199,6 +205,11 @@ class ViewPlan:
                 "scale": round(self.nadir.scale, 4), "owned_radius_px": round(self.nadir.owned_px, 1)},
             "notes": list(self.notes),
         }
+
+
+def view_layout(bands: int, nadir: bool) -> str:
+    """The name of a plan of `bands` bands, with or without the nadir view (`ViewPlan.layout`)."""
+    return f"{bands}band" + ("+nadir" if nadir else "")
 
 
 def _ceil_to(value: float, step: int) -> int:

@@ -21,13 +21,14 @@ from contract import (
     InputMapping,
     ModelInfo,
     OnnxModel,
+    OperatingPoint,
     RawOutputs,
     merge_outputs,
     min_decoded_side,
     view_inputs,
 )
 from contract import select_detections as select_raw
-from contract.views import DEFAULT_VIEW, view_plan
+from contract.views import DEFAULT_VIEW, mapping_layout, view_plan
 from fisheye import FisheyeCamera, cxcywh_to_corners, foot_points, radial_angles_rad
 from fisheye.view_plan import ViewPlan, ViewPlanConfig, ViewPlanError
 from service.frame_decode import DecodedFrame, FrameError, check_frame_size, decode_frame, read_header
@@ -109,9 +110,8 @@ class Pipeline:
     def detect_frame(self, data: bytes, camera: FisheyeCamera, *, min_score: float | None = None,
                      frame_id: str | None = None) -> tuple[DetectionResult, DecodedFrame]:
         """Like `detect`, and also the decoded frame (for drawing the result on it)."""
-        threshold = self.info.default_min_score if min_score is None else float(min_score)
-        if not 0.0 <= threshold <= 1.0:
-            raise ValueError(f"min_score must be within [0, 1], got {threshold}")
+        if min_score is not None and not 0.0 <= float(min_score) <= 1.0:
+            raise ValueError(f"min_score must be within [0, 1], got {min_score}")
         start = time.perf_counter()
         header = read_header(data)
         check_frame_size(header, self.config.max_pixels, self.config.min_frame_side_px)
@@ -132,6 +132,7 @@ class Pipeline:
         raw = merge_outputs([self.model.run(image) for image in images], mapping)
         inferred = time.perf_counter()
 
+        threshold = self.point(mapping_layout(mapping)).min_score if min_score is None else float(min_score)
         kept = self.select(raw, mapping, threshold, frame_camera)
         detections, masked = drop_masked(
             localize(kept.boxes_cxcywh, kept.scores, frame_camera, kept.foot_px), frame_camera)
@@ -159,10 +160,17 @@ class Pipeline:
             return None
         return view_plan(self.info, camera, self.config.view)
 
+    def point(self, layout: str | None) -> OperatingPoint:
+        """The operating point of a view of `layout` (`ViewPlan.layout`; None: a fixed view): the
+        model's own for it (`ModelInfo.point_for`), with the configured NMS IoU where one is set."""
+        own = self.info.point_for(layout)
+        return own if self.config.nms_iou is None else OperatingPoint(own.min_score, self.config.nms_iou)
+
     def select(self, raw: RawOutputs, mapping: InputMapping, threshold: float,
                camera: FisheyeCamera) -> FrameDetections:
         """Model outputs -> the kept detections in frame px: score threshold, finite positive boxes,
-        rotated NMS about `camera`'s principal point, at most max_detections."""
+        rotated NMS about `camera`'s principal point (at the view's operating point's IoU), at most
+        max_detections."""
         pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
-        nms_iou = self.info.nms_iou if self.config.nms_iou is None else self.config.nms_iou
+        nms_iou = self.point(mapping_layout(mapping)).nms_iou
         return select_raw(raw, mapping, pp, threshold, nms_iou, self.config.max_detections)

@@ -150,6 +150,10 @@ class ModelResponse(BaseModel):
     box_format: str
     default_min_score: float
     nms_iou: float = Field(description="rotated NMS IoU the service runs the model at")
+    view_operating_points: dict[str, dict[str, float]] = Field(
+        default_factory=dict, description="a planned model's own operating points (min_score, nms_iou) "
+                                          "for some view layouts (e.g. `2band+nadir`); other views run at "
+                                          "default_min_score and nms_iou")
     pad_value: int
     sha256: str = Field(description="SHA-256 of the model file")
 

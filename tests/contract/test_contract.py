@@ -234,3 +234,32 @@ def test_nadir_view_boxes_are_kept_only_inside_its_owned_disc_and_clear_of_its_e
     np.testing.assert_allclose(centre, camera.principal_point, atol=1e-6)
     with pytest.raises(ValueError, match="3 outputs"):
         merge_outputs([canvas, canvas, canvas], mapping)
+
+
+@pytest.mark.parametrize(("points", "found"), [
+    ('{"1band+nadir": {"min_score": 0.95, "nms_iou": 0.5}}', False),  # its view's own threshold, above 0.9
+    ('{"2band+nadir": {"min_score": 0.95, "nms_iou": 0.5}}', True),  # another view's: the model's 0.3
+])
+def test_a_view_runs_at_its_own_operating_point(tmp_path: Path, points: str, found: bool) -> None:
+    from contract import ModelRunner
+
+    metadata = {**METADATA, "fishloc.view_operating_points": points}
+    path = save_polar_double(tmp_path / "planned.onnx", planned=True, metadata=metadata)
+    model = OnnxModel(path, SessionThreads(1))
+    view = dataclasses.replace(DEFAULT_VIEW, scales=(1.0,))  # one band and the nadir view
+    pipeline = Pipeline(model, PipelineConfig(view=view))
+    camera = camera_from_dict(CAMERA)
+    plan = pipeline.plan(camera)
+    assert plan is not None and plan.layout == "1band+nadir"
+    data, _ = _person_frame(camera, (1.5, 0.8))
+    assert bool(len(pipeline.detect(data, camera).detections.scores)) is found
+    # a caller's threshold wins
+    assert len(pipeline.detect(data, camera, min_score=0.5).detections.scores) > 0
+    # evaluation reads the same point through the runner, and records it with the detections
+    import cv2
+    rgb = cv2.cvtColor(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+    runner = ModelRunner(model, view=view)
+    detections = runner.detect([rgb], [camera], 0.05)[0]
+    expected = model.info.point_for("1band+nadir")
+    assert detections.view_point == expected and len(detections.scores) > 0
+    assert pipeline.point(plan.layout) == expected

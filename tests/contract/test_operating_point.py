@@ -107,3 +107,49 @@ def test_strip_nms_is_greedy_nms_best_first(count: int) -> None:
     kept = strip_nms(boxes, scores, 0.45)
     assert kept.tolist() == _greedy_nms(boxes, scores, 0.45)
     assert 0 < len(kept) < count or count <= 1
+
+
+VIEW_POINTS = '{"1band+nadir": {"min_score": 0.95, "nms_iou": 0.5}}'
+
+
+def test_view_operating_points_round_trip_and_fall_back_to_the_models_own() -> None:
+    from contract import OperatingPoint, metadata_props
+
+    planned = {**METADATA, "fishloc.view_planned": "1", "fishloc.nms_iou": "0.35"}
+    info = parse_metadata({**planned, "fishloc.view_operating_points": VIEW_POINTS}, "m.onnx")
+    assert info.view_points == (("1band+nadir", OperatingPoint(0.95, 0.5)),)
+    assert parse_metadata(metadata_props(info), "m.onnx") == info
+    assert info.point_for("1band+nadir") == OperatingPoint(0.95, 0.5)
+    assert info.point_for("2band+nadir") == info.point_for(None) == OperatingPoint(0.3, 0.35)
+    assert info.public()["view_operating_points"] == {"1band+nadir": {"min_score": 0.95, "nms_iou": 0.5}}
+
+
+@pytest.mark.parametrize(("value", "planned", "message"), [
+    ('{"3 bands": {"min_score": 0.3, "nms_iou": 0.4}}', True, "unknown view layout"),
+    ('{"2band": {"min_score": 1.3, "nms_iou": 0.4}}', True, "min_score in"),
+    ('{"2band": {"min_score": 0.3}}', True, "must be"),
+    ('{"2band": {"min_score": "0.3", "nms_iou": 0.4}}', True, "must be"),
+    ('["2band"]', True, "JSON object"),
+    ("{2band", True, "not JSON"),
+    ('{"2band": {"min_score": 0.3, "nms_iou": 0.4}}', False, "only a planned model"),
+])
+def test_unusable_view_operating_points_are_refused(value: str, planned: bool, message: str) -> None:
+    props = {**METADATA, "fishloc.view_operating_points": value}
+    if planned:
+        props["fishloc.view_planned"] = "1"
+    with pytest.raises(ModelError, match=rf"m\.onnx: unusable.*{message}"):
+        parse_metadata(props, "m.onnx")
+
+
+@pytest.mark.parametrize(("argument", "message"), [
+    ("2band+nadir=0.346", "LAYOUT=SCORE,IOU"),
+    ("2band+nadir=0.346,1.5", "IOU in"),
+    ("two bands=0.3,0.4", "unknown layout"),
+])
+def test_a_malformed_view_point_argument_is_refused(argument: str, message: str) -> None:
+    from detector.checkpoint import CheckpointError, parse_view_point_args
+
+    assert parse_view_point_args(["2band+nadir=0.346,0.3", "1band=0.2,0.4"]) == {
+        "2band+nadir": [0.346, 0.3], "1band": [0.2, 0.4]}
+    with pytest.raises(CheckpointError, match=message):
+        parse_view_point_args([argument])

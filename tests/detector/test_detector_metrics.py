@@ -187,3 +187,16 @@ def test_recall_of_the_people_below_the_lens() -> None:
     assert metrics["recall_nadir"] == pytest.approx(0.5)  # the 0.2 detection is under the threshold
     assert compute_metrics(frames, min_score=0.1)["recall_nadir"] == pytest.approx(1.0)
     assert math.isnan(compute_metrics([_frame([out], [[0.0, 2.0]], [out], [0.9])], 0.5)["recall_nadir"])
+
+
+def test_precision_and_recall_at_each_frames_own_threshold_unless_one_is_given() -> None:
+    # Two frames, one person each found at 0.9; the second frame's view runs at 0.95 (its own
+    # operating point): without a threshold given, each frame counts at its own.
+    person = [199.5, 99.5, 20.0, 40.0]
+    frame = _frame([person], [[0.0, 1.0]], [person], [0.9])
+    frames = [replace(frame, min_score=0.5), replace(frame, min_score=0.95)]
+    own = compute_metrics(frames, None)
+    assert own["recall"] == pytest.approx(0.5) and own["precision"] == pytest.approx(1.0)
+    assert compute_metrics(frames, 0.3)["recall"] == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="own operating threshold"):
+        compute_metrics([frame], None)

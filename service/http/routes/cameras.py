@@ -46,8 +46,9 @@ async def list_cameras(state: State) -> dict[str, list[dict[str, Any]]]:
             description="With a planned model, `view` is the view planned for the camera's frames: the "
                         "model input (`input_wh`, `pixels`, `cost_ratio` against the trained strip), its "
                         "bands, the smallest person in input px and where, its nadir view (`nadir`: the disc "
-                        "below the lens as a second, upright input; null where the budget leaves no room) "
-                        "and notes (a budget that binds).")
+                        "below the lens as a second, upright input; null where the budget leaves no room), "
+                        "notes (a budget that binds), its `layout` and the `operating_point` its frames "
+                        "run at (the model's own for that layout where it has one).")
 async def get_camera(state: State, camera_id: str = CameraId) -> dict[str, Any]:
     camera = await run_in_threadpool(state.registry.get, camera_id)
     if camera is None:
@@ -55,7 +56,9 @@ async def get_camera(state: State, camera_id: str = CameraId) -> dict[str, Any]:
     record = camera_to_dict(camera)
     plan = await run_in_threadpool(_plan_or_refuse, state, camera)
     if plan is not None:
-        record["view"] = plan.public()
+        point = state.runner.pipeline.point(plan.layout)
+        record["view"] = {**plan.public(),
+                          "operating_point": {"min_score": point.min_score, "nms_iou": point.nms_iou}}
     return record
 
 

@@ -115,6 +115,10 @@ def test_a_planned_model_reports_each_camera_view(settings_for: Callable[..., Se
         assert [band["scale"] for band in view["bands"]] == [1.0]
         assert any("budget" in note for note in view["notes"])
         assert view["nadir"] is None and any("no nadir view" in note for note in view["notes"])
+        # the one-band view runs at the model's own operating point
+        model = httpx.get(f"{live.url}/v1/model").json()
+        assert view["layout"] == "1band" and view["operating_point"] == {
+            "min_score": model["default_min_score"], "nms_iou": model["nms_iou"]}
         assert "view" not in httpx.get(f"{live.url}/v1/cameras").json()["cameras"][0]
         # A record read back is written back as it is: its view is the service's, not part of it.
         record = httpx.get(f"{live.url}/v1/cameras/demo").json()
@@ -126,6 +130,9 @@ def test_a_planned_model_reports_each_camera_view(settings_for: Callable[..., Se
         # the nadir view is a second input beside the canvas, counted in the same budget
         assert view["nadir"]["input_wh"] == [448, 448]
         assert view["pixels"] == view["input_wh"][0] * view["input_wh"][1] + 448 * 448 <= 4_000_000
+        # ... at the operating point the model carries for that view (chosen on renders seen through it)
+        points = httpx.get(f"{live.url}/v1/model").json()["view_operating_points"]
+        assert view["layout"] == "2band+nadir" and view["operating_point"] == points["2band+nadir"]
         # the served frame runs both inputs and answers the people of the shipped sample
         sample = (SAMPLES / "000001.jpg").read_bytes()
         answer = httpx.post(f"{live.url}/v1/cameras/demo/detect", content=sample,
