@@ -36,7 +36,7 @@ from contract import (
     SessionThreads,
 )
 from contract.detect import ContractModel
-from contract.views import DEFAULT_VIEW
+from contract.views import DEFAULT_VIEW, mapping_layout
 from detector.checkpoint import CheckpointError, load_checkpoint
 from detector.data.dataset import load_rgb
 from detector.data.readers import ASSUMED_LENSES, DatasetFormatError, FrameAnnotations, read_dataset
@@ -170,8 +170,9 @@ def choose_operating_point(model: ContractModel, frames: Sequence[FrameAnnotatio
                            grid: Sequence[float] = NMS_GRID, view: ViewPlanConfig = DEFAULT_VIEW
                            ) -> tuple[SweptPoint, Evaluation, list[SweptPoint]]:
     """The best-F1 (NMS IoU, threshold) of `model` on validation `frames` (`detector.operating_point`)
-    in the views `view` plans, the evaluation there (its metrics with `min_score` and `nms_iou`),
-    and every IoU's point."""
+    in the views `view` plans, the evaluation there (its metrics with `min_score`, `nms_iou` and
+    the `layouts` of the frames' views: the key a view's own point is stored under), and every
+    IoU's point."""
     runner = ModelRunner(model, view=view)
     outputs = runner.outputs((load_rgb(f) for f in frames), [frame_camera(f) for f in frames])
 
@@ -182,15 +183,18 @@ def choose_operating_point(model: ContractModel, frames: Sequence[FrameAnnotatio
     swept = sweep(frames_at, grid)
     points = [point for point, _ in swept]
     best, evaluated = swept[choose(points)]
-    metrics = {**summarise(evaluated, best.min_score), "nms_iou": best.nms_iou}
+    layouts = sorted({mapping_layout(o.mapping) or "fixed" for o in outputs})
+    metrics = {**summarise(evaluated, best.min_score), "nms_iou": best.nms_iou, "layouts": layouts}
     return best, Evaluation(evaluated, metrics), points
 
 
 def summarise(frames: Sequence[EvalFrame], min_score: float | None) -> dict[str, Any]:
     """Overall metrics plus a `splits` entry per split when there are several; precision and recall
-    at `min_score`, or where it is None at each frame's own (`min_score` then lists them)."""
+    at `min_score`, or where it is None at each frame's own (`min_score` then lists them, where
+    they differ)."""
     metrics: dict[str, Any] = dict(compute_metrics(frames, min_score))
-    metrics["min_score"] = min_score if min_score is not None else sorted({f.min_score for f in frames})
+    own = sorted({f.min_score for f in frames if f.min_score is not None})
+    metrics["min_score"] = min_score if min_score is not None else own[0] if len(own) == 1 else own
     splits = sorted({f.split for f in frames})
     if len(splits) > 1:
         metrics["splits"] = {name: compute_metrics([f for f in frames if f.split == name], min_score)
@@ -267,7 +271,7 @@ def run(args: argparse.Namespace) -> int:
         DEFAULT_VIEW, max_pixels=args.max_view_pixels)
     if args.operating_point:
         best, evaluation, points = choose_operating_point(model, frames, view=view)
-        print(json.dumps({"operating_point": describe([best])[0]}))
+        print(json.dumps({"operating_point": describe([best])[0], "layouts": evaluation.metrics["layouts"]}))
         extra["operating_points"] = describe(points)
     else:
         predictor = RunnerPredictor(ModelRunner(model, args.nms_iou, view=view))

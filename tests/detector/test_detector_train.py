@@ -114,6 +114,7 @@ def test_train_eval_and_export_commands(toy_dataset: Callable[..., Path], tmp_pa
     assert results[".pt"]["AP50"] == pytest.approx(results[".onnx"]["AP50"], abs=1e-6)
     trained = load_checkpoint(out / "last.pt").info  # its operating point, chosen on --val
     assert results[".onnx"]["nms_iou"] == trained.nms_iou and trained.nms_iou in NMS_GRID
+    assert results[".onnx"]["min_score"] == pytest.approx(trained.default_min_score)
     chosen = tmp_path / "chosen.json"
     assert main(["eval", "--model", str(onnx_path), "--data", str(both), "--json", str(chosen),
                  "--operating-point"]) == 0
@@ -121,6 +122,7 @@ def test_train_eval_and_export_commands(toy_dataset: Callable[..., Path], tmp_pa
     assert [p["nms_iou"] for p in swept["operating_points"]] == list(NMS_GRID)
     best = max(swept["operating_points"], key=lambda p: p["f1"])
     assert (swept["nms_iou"], swept["min_score"]) == (best["nms_iou"], best["min_score"])
+    assert swept["layouts"] == ["fixed"]  # a model of a fixed view: no layout to store a point under
     assert main(["eval", "--model", str(onnx_path), "--data", str(both), "--json", str(chosen),
                  "--nms-iou", "1.5"]) == 2
     for plot in ("pr_curve.png", "pe_by_distance.png"):
