@@ -187,7 +187,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--peaks", action="store_true", help="its graph takes the top K among peak cells")
     parser.add_argument("--planned", action="store_true", help="its graph takes planned views (any size)")
     parser.add_argument("--wise-ft", metavar="PRETRAINED_ONNX", default=None,
-                        help="interpolate the fine-tuned head towards this COCO YOLOX-Nano's (WiSE-FT)")
+                        help="interpolate the fine-tuned head towards the COCO head of this ONNX, the one "
+                             "it started from (YOLOX-Nano or NanoDet-Plus-m; WiSE-FT)")
     parser.add_argument("--wise-alpha", type=float, default=0.9,
                         help="weight of the fine-tuned head in that interpolation (default 0.9)")
     args = parser.parse_args(argv)

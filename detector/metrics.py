@@ -1,7 +1,9 @@
 """Detection and localisation metrics of LOAF, on radius-aligned boxes or a dataset's own (numpy).
 
 - AP: COCO-style, 101-point interpolated, greedy matching by score with rotated-box IoU; `mAP` is the
-  mean over IoU 0.50:0.05:0.95, `AP50`, `AP75` single thresholds.
+  mean over IoU 0.50:0.05:0.95, `AP50`, `AP75` single thresholds; `AP10`, `AP30` below it say how
+  much of what AP50 misses is found with a box that fits badly (the model's box fit against the
+  annotators'), not missed.
 - AP_near / AP_mid / AP_far: AP50 restricted to people 0–10, 10–20 and > 20 m from the nadir (GT
   distance). As COCO does for area ranges, people outside the range are ignored (detections matched
   to them count neither way) and so are unmatched detections whose own floor distance (foot point)
@@ -193,9 +195,10 @@ def _ap_at(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch], threshol
 
 
 def _ap_summary(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch]) -> dict[str, float]:
-    """`mAP` (IoU 0.50:0.05:0.95), `AP50` and `AP75` of matched frames."""
+    """`mAP` (IoU 0.50:0.05:0.95), `AP50` and `AP75` of matched frames, and `AP10`, `AP30`."""
     per_threshold = [_ap_at(frames, prepared, float(t)) for t in IOU_THRESHOLDS]
-    return {"mAP": float(np.mean(per_threshold)), "AP50": per_threshold[0], "AP75": per_threshold[5]}
+    return {"mAP": float(np.mean(per_threshold)), "AP50": per_threshold[0], "AP75": per_threshold[5],
+            "AP10": _ap_at(frames, prepared, 0.1), "AP30": _ap_at(frames, prepared, 0.3)}
 
 
 FOOT, BOX_SIDE, CENTRE = "foot", "box_side", "center"  # how a detection is placed on the floor

@@ -15,8 +15,9 @@ from dataclasses import replace
 import torch
 
 from detector.checkpoint import Checkpoint, CheckpointError
+from detector.nanodet.network import NanoDetPlus
 from detector.yolox.network import YoloxNano
-from detector.yolox.polar import PolarDetectorConfig, init_from_pretrained
+from detector.yolox.polar import PolarDetectorConfig, init_network_from_pretrained
 
 HEAD_PREFIX = "head."
 OWN_PREFIXES = ("foot.",)  # trained on their own: kept from the fine-tuned network
@@ -50,17 +51,17 @@ def interpolate_head(fine_tuned: dict[str, torch.Tensor], pretrained: dict[str, 
 
 
 def wise_checkpoint(checkpoint: Checkpoint, pretrained_path: str, alpha: float) -> Checkpoint:
-    """`checkpoint` (a polar YOLOX whose head alone was fine-tuned) with its head interpolated
-    towards the COCO YOLOX-Nano of `pretrained_path` (`init_from_pretrained`); CheckpointError when
-    that cannot be done."""
+    """`checkpoint` (a polar YOLOX-Nano or NanoDet-Plus-m whose head alone was fine-tuned) with its
+    head interpolated towards the COCO network of `pretrained_path`, the ONNX it started from
+    (`init_network_from_pretrained`); CheckpointError when that cannot be done."""
     config = checkpoint.config
     if not isinstance(config, PolarDetectorConfig):
-        raise CheckpointError("the head interpolation needs a polar YOLOX checkpoint")
+        raise CheckpointError("the head interpolation needs a polar checkpoint")
     fine_tuned = checkpoint.build()
-    if not isinstance(fine_tuned, YoloxNano):
-        raise CheckpointError("the head interpolation needs a YOLOX network")
+    if not isinstance(fine_tuned, YoloxNano | NanoDetPlus):
+        raise CheckpointError("the head interpolation needs a YOLOX-Nano or NanoDet-Plus-m network")
     try:
-        pretrained = init_from_pretrained(pretrained_path, config).state_dict()
+        pretrained = init_network_from_pretrained(pretrained_path, config).state_dict()
         state = interpolate_head(fine_tuned.state_dict(), pretrained, alpha)
     except (ValueError, OSError) as error:
         raise CheckpointError(f"{pretrained_path}: {error}") from None

@@ -200,3 +200,11 @@ def test_precision_and_recall_at_each_frames_own_threshold_unless_one_is_given()
     assert compute_metrics(frames, 0.3)["recall"] == pytest.approx(1.0)
     with pytest.raises(ValueError, match="own operating threshold"):
         compute_metrics([frame], None)
+
+
+def test_ap_at_low_iou_counts_a_person_found_with_a_loose_box() -> None:
+    person = [199.5, 99.5, 20.0, 40.0]
+    loose = [199.5, 99.5, 20.0, 40.0 * 0.4]  # the same centre, 0.4 of the length: IoU 0.4
+    metrics = compute_metrics([_frame([person], [[0.0, 1.0]], [loose], [0.9])], min_score=0.5)
+    assert metrics["AP50"] == 0.0
+    assert metrics["AP30"] == pytest.approx(1.0) and metrics["AP10"] == pytest.approx(1.0)

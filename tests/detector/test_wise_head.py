@@ -49,3 +49,25 @@ def test_heads_that_do_not_match_are_refused(change: str) -> None:
 def test_alpha_outside_0_1_is_refused(alpha: float) -> None:
     with pytest.raises(ValueError, match="alpha"):
         interpolate_head(*_states(), alpha)
+
+
+def test_a_nanodet_head_is_interpolated_towards_its_coco_head() -> None:
+    # The NanoDet-Plus-m network reads its COCO head back from the file it started from: halfway
+    # between a moved head and that one is the mean, and everything outside the head stays.
+    from pathlib import Path
+
+    from detector.checkpoint import ModelInfo
+    from detector.yolox.polar import NANODET_PLUS_M, PolarDetectorConfig
+    from detector.yolox.wise import wise_checkpoint
+    from detector.zero_shot import zero_shot_checkpoint
+
+    onnx = Path(__file__).resolve().parents[2].parent / "shared" / "pretrained" / "nanodet-plus-m_416.onnx"
+    config = PolarDetectorConfig(input_size=64, polar_width=224, polar_overlap=32, network=NANODET_PLUS_M)
+    coco = zero_shot_checkpoint(str(onnx), config, ModelInfo())
+    moved = {name: tensor + 1.0 if name.startswith("head.") and tensor.is_floating_point() else tensor
+             for name, tensor in coco.model_state.items()}
+    fine_tuned = type(coco)(config, moved, coco.info, {})
+    blended = wise_checkpoint(fine_tuned, str(onnx), 0.5).model_state
+    for name, tensor in coco.model_state.items():
+        expected = tensor + 0.5 if name.startswith("head.") and tensor.is_floating_point() else tensor
+        assert torch.allclose(blended[name], expected, atol=1e-6), name
