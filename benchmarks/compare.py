@@ -33,7 +33,15 @@ import numpy as np
 from benchmarks.frames import FrameSet, load_frames
 from benchmarks.machine import machine_info
 from benchmarks.stats import summarize
-from contract import ModelRunner, OnnxModel, SessionThreads, min_decoded_side, view_inputs
+from contract import (
+    InputMapping,
+    ModelRunner,
+    OnnxModel,
+    SessionThreads,
+    min_decoded_side,
+    run_view,
+    view_inputs,
+)
 from contract.views import DEFAULT_VIEW
 from detector.baselines import LetterboxPredictor, RotatedCropsPredictor
 from detector.data.readers import read_dataset
@@ -72,18 +80,18 @@ def _onnx_entry(name: str, path: str, threads: int, view: ViewPlanConfig = DEFAU
     model = OnnxModel(path, SessionThreads(intra_op=threads))
     pipeline = Pipeline(model, PipelineConfig(view=view))
     pipeline.warm_up()
-    inputs: dict[bytes, list[np.ndarray]] = {}
+    inputs: dict[bytes, tuple[list[np.ndarray], InputMapping]] = {}
 
-    def model_inputs(data: bytes, camera: FisheyeCamera) -> list[np.ndarray]:
+    def model_inputs(data: bytes, camera: FisheyeCamera) -> tuple[list[np.ndarray], InputMapping]:
         if data not in inputs:
             frame_camera = camera.scaled_to(read_header(data).size_wh)
             frame = decode_frame(data, min_decoded_side(model.info, frame_camera, view), 40_000_000)
-            inputs[data] = view_inputs(model.info, frame.rgb, frame_camera, view)[0]
+            inputs[data] = view_inputs(model.info, frame.rgb, frame_camera, view)
         return inputs[data]
 
     def inference_ms(data: bytes, camera: FisheyeCamera) -> float:
-        images = model_inputs(data, camera)  # made outside the timed call
-        return _timed(lambda: [model.run(image) for image in images])
+        images, mapping = model_inputs(data, camera)  # made outside the timed call
+        return _timed(lambda: run_view(model, images, mapping))
 
     return Entry(name, RunnerPredictor(ModelRunner(model, view=view)),
                  lambda data, camera: _timed(lambda: pipeline.detect(data, camera)), inference_ms)

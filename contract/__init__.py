@@ -14,6 +14,7 @@ from contract.detect import (
     ModelRunner,
     merge_outputs,
     reduce_like_decode,
+    run_view,
     select_detections,
     view_inputs,
 )
@@ -54,6 +55,7 @@ __all__ = [
     "polar_grid",
     "prepare_input",
     "reduce_like_decode",
+    "run_view",
     "select_detections",
     "view_inputs",
 ]

@@ -130,10 +130,20 @@ def merge_outputs(raws: Sequence[RawOutputs], mapping: InputMapping) -> RawOutpu
     boxes = np.concatenate([canvas.boxes, nadir.boxes + np.array([shift, 0, shift, 0], dtype=np.float32)])
     scores = np.concatenate([canvas.scores, nadir.scores])
     foot = None
-    if canvas.foot is not None and nadir.foot is not None:
-        foot = np.concatenate([canvas.foot, nadir.foot + np.array([shift, 0], dtype=np.float32)])
+    if canvas.foot is not None:
+        # the nadir view's people stand at their box side (`box_side_feet`): where it was run
+        # without the foot branch (`run_view`), its boxes' bottom centres hold the place
+        nadir_foot = nadir.foot if nadir.foot is not None else np.stack(
+            [(nadir.boxes[:, 0] + nadir.boxes[:, 2]) / 2, nadir.boxes[:, 3]], axis=1)
+        foot = np.concatenate([canvas.foot, nadir_foot + np.array([shift, 0], dtype=np.float32)])
     order = np.argsort(-scores, kind="stable")
     return RawOutputs(boxes[order], scores[order], None if foot is None else foot[order])
+
+
+def run_view(model: ContractModel, images: Sequence[NDArray[np.uint8]], mapping: InputMapping) -> RawOutputs:
+    """Run a view's inputs (`view_inputs`) and merge their outputs (`merge_outputs`): the nadir
+    view without the foot branch (`ContractModel.run_boxes`), its people placed by the box side."""
+    return merge_outputs([model.run(images[0]), *(model.run_boxes(image) for image in images[1:])], mapping)
 
 
 def view_inputs(info: ModelInfo, rgb: NDArray[np.uint8], camera: FisheyeCamera,
@@ -175,6 +185,10 @@ class ContractModel(Protocol):
 
     def run(self, image: NDArray[np.uint8]) -> RawOutputs: ...
 
+    def run_boxes(self, image: NDArray[np.uint8]) -> RawOutputs:
+        """Boxes and scores alone (`foot` None); a model may skip its foot branch for them."""
+        ...
+
 
 class ModelRunner:
     """Decoded full-size frames with their cameras -> FrameDetections, as the service computes them."""
@@ -207,7 +221,7 @@ class ModelRunner:
             reduced = reduce_like_decode(rgb, min_decoded_side(info, camera, self.view))
             images, mapping = view_inputs(info, reduced, camera, self.view)
             pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
-            raw = merge_outputs([self.model.run(image) for image in images], mapping)
+            raw = run_view(self.model, images, mapping)
             found.append(FrameOutputs(raw, mapping, pp))
         return found
 

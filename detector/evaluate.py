@@ -88,6 +88,10 @@ class TorchContract:
         arrays = [o[0].float().cpu().numpy() for o in outputs]
         return RawOutputs(arrays[0], arrays[1], arrays[2] if len(arrays) > 2 else None)
 
+    def run_boxes(self, image: NDArray[np.uint8]) -> RawOutputs:
+        """Boxes and scores alone (the module runs whole; `OnnxModel` skips its foot branch)."""
+        return dataclasses.replace(self.run(image), foot=None)
+
 
 class RunnerPredictor:
     """Any contract model (ONNX session or torch module) behind `contract.ModelRunner`."""

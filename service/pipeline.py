@@ -23,8 +23,8 @@ from contract import (
     OnnxModel,
     OperatingPoint,
     RawOutputs,
-    merge_outputs,
     min_decoded_side,
+    run_view,
     view_inputs,
 )
 from contract import select_detections as select_raw
@@ -101,6 +101,7 @@ class Pipeline:
         blank = self.model.blank_input()
         for _ in range(runs):
             self.model.run(blank)
+            self.model.run_boxes(blank)  # the nadir view's session, where the model has one
 
     def detect(self, data: bytes, camera: FisheyeCamera, *, min_score: float | None = None,
                frame_id: str | None = None) -> DetectionResult:
@@ -129,7 +130,7 @@ class Pipeline:
         images, mapping = view_inputs(self.info, frame.rgb, frame_camera, self.config.view)
         preprocessed = time.perf_counter()
 
-        raw = merge_outputs([self.model.run(image) for image in images], mapping)
+        raw = run_view(self.model, images, mapping)
         inferred = time.perf_counter()
 
         threshold = self.point(mapping_layout(mapping)).min_score if min_score is None else float(min_score)

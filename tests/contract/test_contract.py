@@ -263,3 +263,32 @@ def test_a_view_runs_at_its_own_operating_point(tmp_path: Path, points: str, fou
     expected = model.info.point_for("1band+nadir")
     assert detections.view_point == expected and len(detections.scores) > 0
     assert pipeline.point(plan.layout) == expected
+
+
+@pytest.mark.parametrize("spinning", [False, True])
+def test_the_nadir_view_runs_without_the_foot_branch(tmp_path: Path, spinning: bool) -> None:
+    # `run_boxes` answers the boxes and scores of `run` and no foot (a second session of the graph
+    # cut to them; with spinning thread pools the one session serves); merged with the canvas's
+    # outputs, the nadir view's candidates get finite places for feet they never use.
+    from contract import merge_outputs, run_view
+    from contract.views import PlannedInput
+
+    path = save_polar_double(tmp_path / "planned.onnx", foot=True, planned=True)
+    model = OnnxModel(path, SessionThreads(1, allow_spinning=spinning))
+    image = np.zeros((64, 96, 3), dtype=np.uint8)
+    image[20:30, 40:50] = 255
+    full, boxes_only = model.run(image), model.run_boxes(image)
+    assert (model._boxes_session is None) is spinning  # the cut graph's session, where it pays
+    assert boxes_only.foot is None and full.foot is not None
+    np.testing.assert_array_equal(boxes_only.boxes, full.boxes)
+    np.testing.assert_array_equal(boxes_only.scores, full.scores)
+    pipeline = Pipeline(model, PipelineConfig(view=dataclasses.replace(DEFAULT_VIEW, scales=(1.0,))))
+    camera = camera_from_dict(CAMERA)
+    plan = pipeline.plan(camera)
+    assert plan is not None and plan.nadir is not None
+    mapping = PlannedInput(plan)
+    side = plan.nadir.side
+    merged = run_view(model, [np.zeros((plan.canvas_wh[1], plan.canvas_wh[0], 3), np.uint8),
+                              np.zeros((side, side, 3), np.uint8)], mapping)
+    assert merged.foot is not None and np.isfinite(merged.foot).all() and len(merged.scores) == 2
+    assert merge_outputs([full, boxes_only], mapping).foot is not None
