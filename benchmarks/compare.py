@@ -111,16 +111,30 @@ def _predictor_entry(name: str, predictor: Predictor) -> Entry:
     return Entry(name, predictor, frame_ms, None)
 
 
+def view_from_spec(text: str) -> ViewPlanConfig:
+    """`PIXELS[,FIELD=VALUE...]` -> the default view plan with that budget and those numeric
+    `ViewPlanConfig` fields (e.g. `1000000,nadir_scale=1.25`); ValueError naming a bad one."""
+    pixels, *fields = text.split(",")
+    changes: dict[str, float] = {}
+    known = {f.name for f in dataclasses.fields(ViewPlanConfig)}
+    for field_text in fields:
+        key, _, value = field_text.partition("=")
+        if key not in known or not isinstance(getattr(DEFAULT_VIEW, key), float):
+            raise ValueError(f"{field_text!r}: not a numeric field of the view plan")
+        changes[key] = float(value)
+    return dataclasses.replace(DEFAULT_VIEW, max_pixels=int(pixels), **changes)  # type: ignore[arg-type]
+
+
 def build_entry(name: str, spec: str, threads: int) -> Entry:
     """`spec` is an ONNX file (`FILE@PIXELS`: a planned model's views within PIXELS, as `fishloc
-    serve --max-view-pixels`), a checkpoint, or `KIND:ONNX` for a zero-shot baseline."""
+    serve --max-view-pixels`; `FILE@PIXELS,nadir_scale=1.25`: other fields of the plan too), a
+    checkpoint, or `KIND:ONNX` for a zero-shot baseline."""
     kind, _, path = spec.partition(":")
     if kind in BASELINES and path:
         return _predictor_entry(name, BASELINES[kind](path, threads))
-    file, _, pixels = spec.partition("@")
+    file, _, view_text = spec.partition("@")
     if Path(file).suffix.lower() == ".onnx":
-        view = dataclasses.replace(DEFAULT_VIEW, max_pixels=int(pixels)) if pixels else DEFAULT_VIEW
-        return _onnx_entry(name, file, threads, view)
+        return _onnx_entry(name, file, threads, view_from_spec(view_text) if view_text else DEFAULT_VIEW)
     return _predictor_entry(name, load_predictor(spec, threads=threads))
 
 
@@ -176,7 +190,9 @@ def markdown(rows: dict[str, dict[str, Any]], datasets: list[str]) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model", action="append", default=[], metavar="NAME=PATH",
-                        help="a FishLoc ONNX model or checkpoint (repeat)")
+                        help="a FishLoc ONNX model or checkpoint (repeat); PATH@PIXELS[,FIELD=VALUE...] "
+                             "runs a planned model in the views of that budget and plan, e.g. "
+                             "model.onnx@1000000,nadir_scale=1.25")
     parser.add_argument("--baseline", action="append", default=[], metavar="NAME=KIND:ONNX",
                         help="a zero-shot baseline: rotations:ONNX or letterbox:ONNX (repeat)")
     parser.add_argument("--data", action="append", default=[], metavar="NAME=ANNOTATIONS",

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from benchmarks.compare import main
+from contract.views import DEFAULT_VIEW
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -30,3 +31,14 @@ def test_compare_table_and_json(tmp_path: Path, capsys: pytest.CaptureFixture[st
     times = shipped["times"]
     assert all(times[k] > 0 for k in ("inference_p50_ms", "e2e_p50_ms", "e2e_p95_ms"))  # measured, not judged
     assert record["rows"]["letterbox"]["times"]["inference_p50_ms"] is None
+
+
+def test_a_model_spec_names_the_budget_and_other_fields_of_the_plan() -> None:
+    from benchmarks.compare import view_from_spec
+
+    view = view_from_spec("1000000,nadir_scale=1.25")
+    assert view.max_pixels == 1_000_000 and view.nadir_scale == 1.25
+    assert view_from_spec("4000000").nadir_scale == DEFAULT_VIEW.nadir_scale
+    for bad in ("1000000,scales=2", "1000000,size=3", "many"):
+        with pytest.raises(ValueError):
+            view_from_spec(bad)
