@@ -31,7 +31,8 @@ from fisheye.view_plan import ViewPlanConfig
 # The designs compared for 0.6.0: the trained strip, and two bands (the rim at 1.5x) with the inner
 # band over the whole disc or reaching 0.6 of a standing adult past the split, or at 0.75x; then
 # each view with the nadir view beside it (`fisheye.view_plan.NadirPiece`), showing 0.25, 0.3 or
-# 0.35 of the image circle's radius at 1.25x to 1.95x the strip's radial scale.
+# 0.35 of the image circle's radius at 1.25x to 1.95x the strip's radial scale; then the strip
+# starting 0.1 or 0.2 of the radius out where the nadir view shows the disc within.
 BANDS = dataclasses.replace(DEFAULT_VIEW, max_pixels=4_000_000, nadir_fraction=None)
 DESIGNS: dict[str, ViewPlanConfig] = {
     "strip (one band, 1.0x)": dataclasses.replace(DEFAULT_VIEW, scales=(1.0,), nadir_fraction=None),
@@ -43,6 +44,10 @@ DESIGNS: dict[str, ViewPlanConfig] = {
        for shown, scale in ((0.25, 1.95), (0.3, 1.95), (0.35, 1.25), (0.35, 1.5), (0.35, 1.95))},
     **{f"two bands 1.0x / 1.5x, margin 0.6, + nadir view 0.35 at {scale:g}x": dataclasses.replace(
         BANDS, nadir_fraction=0.2, nadir_scale=scale) for scale in (1.5, 1.95)},
+    # 0.6.2: with the nadir view the strip leaves it the disc within 0.1 or 0.2 of the radius
+    **{f"strip from {start:g} + nadir view 0.35 at {scale:g}x": dataclasses.replace(
+        DEFAULT_VIEW, scales=(1.0,), max_pixels=4_000_000, nadir_scale=scale, nadir_strip_from=start)
+       for start, scale in ((0.1, 1.25), (0.1, 1.5), (0.2, 1.5))},
 }
 FIGURES = ("AP50", "precision", "recall", "AP_far", "recall_nadir", "mPE")
 

@@ -90,6 +90,9 @@ class ViewPlanConfig:
     nadir_fraction: float | None = 0.2
     nadir_view_fraction: float = 0.35
     nadir_scale: float = 1.5
+    # With a nadir view the strip (its innermost band) may start this fraction of the image circle's
+    # radius out: the nadir view shows the disc within. None: the strip starts at the principal point.
+    nadir_strip_from: float | None = None
 
     def __post_init__(self) -> None:
         if not self.scales or any(not (0.25 <= s <= 4.0) for s in self.scales) or (
@@ -104,6 +107,9 @@ class ViewPlanConfig:
         if self.nadir_fraction is not None and not (
                 0 < self.nadir_fraction < self.nadir_view_fraction <= 1 and 0.25 <= self.nadir_scale <= 8):
             raise ValueError("need 0 < nadir_fraction < nadir_view_fraction <= 1, nadir_scale in [0.25, 8]")
+        if self.nadir_strip_from is not None and not 0 < self.nadir_strip_from < self.nadir_view_fraction:
+            raise ValueError("need 0 < nadir_strip_from < nadir_view_fraction: the nadir view must show "
+                             "the disc the strip leaves out")
 
 
 @dataclass(frozen=True)
@@ -393,6 +399,12 @@ def plan_view(camera: FisheyeCamera, reference: ViewReference | None = None,
     need = np.where(seen, _needed_scale(along, across, rows_per_px, reference, config), 0.0)
     wanted = _bands(camera, radii, need, seen, top, rows_per_px, config)
     bands, layout, notes = _within_budget(camera, wanted, top, rows_per_px, reference, config)
+    trimmed = _strip_from(bands, camera, rows_per_px, config)
+    if trimmed is not None:  # with the nadir view the strip may leave it the disc: fewer rows
+        trimmed_layout = _layout(camera, trimmed, reference, config)
+        nadir = _nadir_piece(camera, trimmed_layout[2], reference, config)
+        if nadir is not None and _pixels(trimmed_layout) + nadir.side ** 2 <= config.max_pixels:
+            bands, layout = trimmed, trimmed_layout
     grids, offsets, canvas = layout
     nadir = _nadir_piece(camera, canvas, reference, config)
     if nadir is not None and canvas[0] * canvas[1] + nadir.side ** 2 > config.max_pixels:
@@ -409,6 +421,19 @@ def plan_view(camera: FisheyeCamera, reference: ViewReference | None = None,
         notes.append(f"the frame cuts the image circle ({ring:.0f} px radius, {edge:.0f} px to the nearest "
                      f"edge): the view reaches {top:.0f} px, the frame's corners included")
     return ViewPlan(grids, offsets, canvas, tuple(bands), smallest, reference.pixels, tuple(notes), nadir)
+
+
+def _strip_from(bands: list[ViewBand], camera: FisheyeCamera, rows_per_px: float, config: ViewPlanConfig
+                ) -> list[ViewBand] | None:
+    """The bands with the innermost starting `nadir_strip_from` of the image circle's radius out
+    (None where the config asks for no nadir view or no such start)."""
+    if config.nadir_fraction is None or config.nadir_strip_from is None:
+        return None
+    inner = bands[0]
+    start = config.nadir_strip_from * camera.image_circle_radius_px()
+    if start >= inner.radius_px:
+        return None
+    return _with_pieces([_band(start, inner.radius_px, inner.scale, rows_per_px, inner.owned_px), *bands[1:]])
 
 
 def _nadir_piece(camera: FisheyeCamera, canvas_wh: tuple[int, int], reference: ViewReference,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -139,3 +140,30 @@ def test_the_default_budget_has_no_room_for_the_nadir_view_and_says_so() -> None
 def test_an_impossible_nadir_view_is_refused(kwargs: dict[str, float]) -> None:
     with pytest.raises(ValueError, match="nadir"):
         ViewPlanConfig(**kwargs)  # type: ignore[arg-type]
+
+
+def test_with_the_nadir_view_the_strip_may_leave_it_the_disc() -> None:
+    # Starting the strip 0.1 of the radius out saves rows (416 -> 384 for the demo camera), and
+    # those saved rows can make room for the nadir view in a budget the whole strip and it overrun.
+    circle = DEMO.image_circle_radius_px()
+    config = ViewPlanConfig(max_pixels=900_000, nadir_strip_from=0.1)
+    assert plan_view(DEMO, config=dataclasses.replace(config, nadir_strip_from=None)).nadir is None
+    plan = plan_view(DEMO, config=config)
+    assert plan.nadir is not None and plan.layout == "1band+nadir"
+    (band,) = plan.bands
+    assert band.inner_radius_px == pytest.approx(0.1 * circle) and band.rows < 416
+    assert plan.canvas_wh == (1792, 384) and plan.pixels == 1792 * 384 + 448 * 448 <= 900_000
+    assert plan.grids[0].inner_radius_px == pytest.approx(0.1 * circle)
+    # where even the trimmed strip and the nadir view do not fit, the strip is whole and alone
+    tight = plan_view(DEMO, config=dataclasses.replace(config, max_pixels=800_000))
+    assert tight.nadir is None and tight.bands[0].inner_radius_px == 0.0 and tight.canvas_wh == (1792, 416)
+    # two bands: the inner one starts out, the outer is unchanged
+    wide = plan_view(DEMO, config=dataclasses.replace(config, max_pixels=4_000_000))
+    full = plan_view(DEMO, config=LARGE)
+    assert wide.bands[0].inner_radius_px == pytest.approx(0.1 * circle) and wide.bands[1] == full.bands[1]
+
+
+@pytest.mark.parametrize("start", [0.0, 0.35, 0.5])
+def test_a_strip_start_the_nadir_view_does_not_cover_is_refused(start: float) -> None:
+    with pytest.raises(ValueError, match="nadir_strip_from"):
+        ViewPlanConfig(nadir_strip_from=start)
