@@ -116,10 +116,10 @@ def view_from_spec(text: str) -> ViewPlanConfig:
     `ViewPlanConfig` fields (e.g. `1000000,nadir_scale=1.25`); ValueError naming a bad one."""
     pixels, *fields = text.split(",")
     changes: dict[str, float] = {}
-    known = {f.name for f in dataclasses.fields(ViewPlanConfig)}
+    numeric = {f.name for f in dataclasses.fields(ViewPlanConfig) if f.type in ("float", "float | None")}
     for field_text in fields:
         key, _, value = field_text.partition("=")
-        if key not in known or not isinstance(getattr(DEFAULT_VIEW, key), float):
+        if key not in numeric:
             raise ValueError(f"{field_text!r}: not a numeric field of the view plan")
         changes[key] = float(value)
     return dataclasses.replace(DEFAULT_VIEW, max_pixels=int(pixels), **changes)  # type: ignore[arg-type]

@@ -36,8 +36,8 @@ def test_compare_table_and_json(tmp_path: Path, capsys: pytest.CaptureFixture[st
 def test_a_model_spec_names_the_budget_and_other_fields_of_the_plan() -> None:
     from benchmarks.compare import view_from_spec
 
-    view = view_from_spec("1000000,nadir_scale=1.25")
-    assert view.max_pixels == 1_000_000 and view.nadir_scale == 1.25
+    view = view_from_spec("1000000,nadir_scale=1.25,nadir_strip_from=0.1")
+    assert view.max_pixels == 1_000_000 and view.nadir_scale == 1.25 and view.nadir_strip_from == 0.1
     assert view_from_spec("4000000").nadir_scale == DEFAULT_VIEW.nadir_scale
     for bad in ("1000000,scales=2", "1000000,size=3", "many"):
         with pytest.raises(ValueError):
