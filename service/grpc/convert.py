@@ -156,7 +156,9 @@ def model_to_message(info: ModelInfo) -> pb.ModelInfo:
     return pb.ModelInfo(
         name=info.name, version=info.version, input_size=info.input_size, trained_on=info.trained_on,
         box_format=info.box_format, default_min_score=info.default_min_score, pad_value=info.pad_value,
-        sha256=info.sha256,
+        sha256=info.sha256, nms_iou=info.nms_iou,
+        view_operating_points={layout: pb.OperatingPoint(min_score=point.min_score, nms_iou=point.nms_iou)
+                               for layout, point in info.view_points},
     )
 
 

@@ -218,8 +218,23 @@ class GetModelRequest(_message.Message):
     __slots__ = ()
     def __init__(self) -> None: ...
 
+class OperatingPoint(_message.Message):
+    __slots__ = ("min_score", "nms_iou")
+    MIN_SCORE_FIELD_NUMBER: _ClassVar[int]
+    NMS_IOU_FIELD_NUMBER: _ClassVar[int]
+    min_score: float
+    nms_iou: float
+    def __init__(self, min_score: _Optional[float] = ..., nms_iou: _Optional[float] = ...) -> None: ...
+
 class ModelInfo(_message.Message):
-    __slots__ = ("name", "version", "input_size", "trained_on", "box_format", "default_min_score", "pad_value", "sha256")
+    __slots__ = ("name", "version", "input_size", "trained_on", "box_format", "default_min_score", "pad_value", "sha256", "nms_iou", "view_operating_points")
+    class ViewOperatingPointsEntry(_message.Message):
+        __slots__ = ("key", "value")
+        KEY_FIELD_NUMBER: _ClassVar[int]
+        VALUE_FIELD_NUMBER: _ClassVar[int]
+        key: str
+        value: OperatingPoint
+        def __init__(self, key: _Optional[str] = ..., value: _Optional[_Union[OperatingPoint, _Mapping]] = ...) -> None: ...
     NAME_FIELD_NUMBER: _ClassVar[int]
     VERSION_FIELD_NUMBER: _ClassVar[int]
     INPUT_SIZE_FIELD_NUMBER: _ClassVar[int]
@@ -228,6 +243,8 @@ class ModelInfo(_message.Message):
     DEFAULT_MIN_SCORE_FIELD_NUMBER: _ClassVar[int]
     PAD_VALUE_FIELD_NUMBER: _ClassVar[int]
     SHA256_FIELD_NUMBER: _ClassVar[int]
+    NMS_IOU_FIELD_NUMBER: _ClassVar[int]
+    VIEW_OPERATING_POINTS_FIELD_NUMBER: _ClassVar[int]
     name: str
     version: str
     input_size: int
@@ -236,7 +253,9 @@ class ModelInfo(_message.Message):
     default_min_score: float
     pad_value: int
     sha256: str
-    def __init__(self, name: _Optional[str] = ..., version: _Optional[str] = ..., input_size: _Optional[int] = ..., trained_on: _Optional[str] = ..., box_format: _Optional[str] = ..., default_min_score: _Optional[float] = ..., pad_value: _Optional[int] = ..., sha256: _Optional[str] = ...) -> None: ...
+    nms_iou: float
+    view_operating_points: _containers.MessageMap[str, OperatingPoint]
+    def __init__(self, name: _Optional[str] = ..., version: _Optional[str] = ..., input_size: _Optional[int] = ..., trained_on: _Optional[str] = ..., box_format: _Optional[str] = ..., default_min_score: _Optional[float] = ..., pad_value: _Optional[int] = ..., sha256: _Optional[str] = ..., nms_iou: _Optional[float] = ..., view_operating_points: _Optional[_Mapping[str, OperatingPoint]] = ...) -> None: ...
 
 class WatchSiteRequest(_message.Message):
     __slots__ = ("site",)

@@ -298,6 +298,7 @@ def test_registry_calls_and_token(server: LiveServer, demo_camera: FisheyeCamera
     assert demo.HasField("site_pose")
     assert out["gone"] == grpc.StatusCode.NOT_FOUND
     assert out["model"].name == "plumbing-double" and out["model"].input_size == 256
+    assert out["model"].nms_iou == 0.6 and not out["model"].view_operating_points  # legacy point, no views
 
 
 def test_health_follows_readiness_and_reflection_lists_the_service(server: LiveServer) -> None:
@@ -415,3 +416,16 @@ def test_taken_ports_stop_start_up(server: LiveServer, settings_for: Callable[..
         LiveServer(settings_for(grpc_port=server.service.grpc_port)).start()
     with pytest.raises(OSError, match="cannot listen for REST"):
         LiveServer(settings_for(grpc_port=0, http_port=server.service.http_port)).start()
+
+
+def test_the_model_message_carries_each_views_operating_point() -> None:
+    from contract import OnnxModel, OperatingPoint, SessionThreads
+    from models import DEFAULT_MODEL_PATH
+    from service.grpc.convert import model_to_message
+
+    info = OnnxModel(DEFAULT_MODEL_PATH, SessionThreads(1)).info
+    message = model_to_message(info)
+    assert message.nms_iou == pytest.approx(info.nms_iou) and info.view_points
+    for layout, point in info.view_points:
+        got = message.view_operating_points[layout]
+        assert OperatingPoint(got.min_score, got.nms_iou) == point
