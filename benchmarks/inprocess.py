@@ -10,9 +10,12 @@ a shared machine hits them alike and their ratios stay meaningful:
   points, floor, site).
 - *naive*: full-size `cv2.imdecode`, the model's view made from the full frame, onnxruntime with
   default session options, then the same post-processing: what a first attempt would do.
-- *floor*: model inference alone on an input decoded and letterboxed beforehand, and the decode
-  alone; their sum is what any service must spend on a frame, and the service's overhead is
-  measured over it (in wall-clock and, less sensitive to other processes, in CPU time).
+- *floor*: model inference alone on the view's inputs made beforehand, and the decode alone; their
+  sum is what any service must spend on a frame, and the service's overhead is measured over it
+  (in wall-clock and, less sensitive to other processes, in CPU time).
+
+Every one of them sees the view the service plans (`FISHLOC_MAX_VIEW_PIXELS` included: a budget
+with room for the nadir view times it too).
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ from numpy.typing import NDArray
 
 from benchmarks.frames import FrameSet
 from benchmarks.stats import Summary, overhead_pct, ratio, summarize
-from contract import InputMapping, RawOutputs, min_decoded_side, prepare_input
+from contract import InputMapping, RawOutputs, merge_outputs, min_decoded_side, run_view, view_inputs
 from fisheye import FisheyeCamera
 from service.core.config import Settings
 from service.core.metrics import ServiceMetrics
@@ -48,15 +51,15 @@ def staged_detect(pipeline: Pipeline, data: bytes, camera: FisheyeCamera,
                   threshold: float) -> tuple[dict[str, float], Detections]:
     """The calls of `Pipeline.detect`, each timed: stage -> ms (STAGES, and `decode_cpu`: the
     decoding thread's CPU time, which other processes' load does not inflate), and the detections."""
-    info = pipeline.info
+    info, view = pipeline.info, pipeline.config.view
     start, start_cpu = time.perf_counter(), time.thread_time()
     header = read_header(data)
     frame_camera = camera.scaled_to(header.size_wh)
-    frame = decode_frame(data, min_decoded_side(info, frame_camera), pipeline.config.max_pixels, header)
+    frame = decode_frame(data, min_decoded_side(info, frame_camera, view), pipeline.config.max_pixels, header)
     decoded, decoded_cpu = time.perf_counter(), time.thread_time()
-    image, mapping = prepare_input(info, frame.rgb, frame_camera)
+    images, mapping = view_inputs(info, frame.rgb, frame_camera, view)
     preprocessed = time.perf_counter()
-    raw = pipeline.model.run(image)
+    raw = run_view(pipeline.model, images, mapping)
     inferred = time.perf_counter()
     kept = pipeline.select(raw, mapping, threshold, frame_camera)
     selected = time.perf_counter()
@@ -78,27 +81,30 @@ class NaivePipeline:
         self.pipeline = pipeline
         self.camera = camera
 
-    def model_input(self, data: bytes) -> tuple[NDArray[np.uint8], InputMapping, FisheyeCamera]:
+    def model_input(self, data: bytes) -> tuple[list[NDArray[np.uint8]], InputMapping, FisheyeCamera]:
         return self.full_decode_input(data, self.pipeline, self.camera)
 
     @staticmethod
     def full_decode_input(data: bytes, pipeline: Pipeline, camera: FisheyeCamera
-                          ) -> tuple[NDArray[np.uint8], InputMapping, FisheyeCamera]:
-        """Full decode of `data` and `pipeline`'s view of it: the model input, its mapping to frame
-        px and the camera scaled to the frame."""
+                          ) -> tuple[list[NDArray[np.uint8]], InputMapping, FisheyeCamera]:
+        """Full decode of `data` and `pipeline`'s view of it: the model's inputs (the view's, then
+        its nadir view where the plan has one), their mapping to frame px and the camera scaled to
+        the frame."""
         bgr = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_COLOR)
         if bgr is None:
             raise ValueError("OpenCV cannot decode the frame")
         rgb = np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), dtype=np.uint8)
         frame_camera = camera.scaled_to((rgb.shape[1], rgb.shape[0]))
-        image, mapping = prepare_input(pipeline.info, rgb, frame_camera)
-        return image, mapping, frame_camera
+        images, mapping = view_inputs(pipeline.info, rgb, frame_camera, pipeline.config.view)
+        return images, mapping, frame_camera
 
     def detect(self, data: bytes, threshold: float) -> Detections:
-        image, mapping, frame_camera = self.model_input(data)
-        boxes, scores = self.session.run(["boxes", "scores"], {"image": image[None]})
-        raw = RawOutputs(np.asarray(boxes[0], np.float32), np.asarray(scores[0], np.float32))
-        kept = self.pipeline.select(raw, mapping, threshold, frame_camera)
+        images, mapping, frame_camera = self.model_input(data)
+        raws = []
+        for image in images:
+            boxes, scores = self.session.run(["boxes", "scores"], {"image": image[None]})
+            raws.append(RawOutputs(np.asarray(boxes[0], np.float32), np.asarray(scores[0], np.float32)))
+        kept = self.pipeline.select(merge_outputs(raws, mapping), mapping, threshold, frame_camera)
         return localize(kept.boxes_cxcywh, kept.scores, frame_camera)
 
 
@@ -183,9 +189,9 @@ def run_in_process(model_path: Path, frames: FrameSet, camera: FisheyeCamera, th
     naive = NaivePipeline(model_path, pipeline, camera)
     info = pipeline.info
     threshold = info.default_min_score
-    inputs = [naive.model_input(data)[0] for data in frames.data]
+    inputs = [naive.model_input(data)[:2] for data in frames.data]
     frame_camera = camera.scaled_to(read_header(frames.data[0]).size_wh)
-    decoded_side = min_decoded_side(info, frame_camera)
+    decoded_side = min_decoded_side(info, frame_camera, pipeline.config.view)
     service_threads = cv2.getNumThreads()
 
     def naive_detect(data: bytes) -> None:
@@ -215,7 +221,7 @@ def run_in_process(model_path: Path, frames: FrameSet, camera: FisheyeCamera, th
         _settle()
         decode_time = _timed(partial(decode_frame, data, decoded_side, pipeline.config.max_pixels))
         _settle()
-        floor_time, floor_cpu_ms = _timed_cpu(partial(pipeline.model.run, inputs[index % len(frames)]))
+        floor_time, floor_cpu_ms = _timed_cpu(partial(run_view, pipeline.model, *inputs[index % len(frames)]))
         _settle()
         whole_ms, whole_cpu_ms = _timed_cpu(partial(pipeline.detect, data, camera, min_score=threshold))
         _settle()

@@ -91,6 +91,7 @@ def evaluate_ap50(model: Path, eval_data: Path | None) -> tuple[float | None, st
 def run(args: argparse.Namespace) -> int:
     from benchmarks.inprocess import service_pipeline
     from benchmarks.machine import machine_info
+    from contract import run_view
     from fisheye import load_camera
     from service.core.cpu import cpu_budget
 
@@ -102,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
     for pipeline in pipelines:
         from benchmarks.inprocess import NaivePipeline
 
-        inputs.append(NaivePipeline.full_decode_input(frames.data[0], pipeline, camera)[0])
+        inputs.append(NaivePipeline.full_decode_input(frames.data[0], pipeline, camera)[:2])
     whole: list[list[float]] = [[] for _ in pipelines]
     alone: list[list[float]] = [[] for _ in pipelines]
     whole_cpu: list[list[float]] = [[] for _ in pipelines]
@@ -115,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
             start, start_cpu = time.perf_counter(), time.process_time()
             pipeline.detect(data, camera)
             middle, middle_cpu = time.perf_counter(), time.process_time()
-            pipeline.model.run(inputs[slot])
+            run_view(pipeline.model, *inputs[slot])
             end, end_cpu = time.perf_counter(), time.process_time()
             if index >= args.warmup:
                 whole[slot].append((middle - start) * 1e3)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -67,3 +68,36 @@ def test_cpu_model_name_from_cpuinfo() -> None:
     text = "processor\t: 0\nvendor_id\t: AuthenticAMD\nmodel name\t: AMD EPYC 7B13 64-Core Processor\n"
     assert cpu_model_name(text) == "AMD EPYC 7B13 64-Core Processor"
     assert cpu_model_name("Hardware\t: BCM2835\n") == "BCM2835"
+
+
+def test_the_staged_and_naive_paths_see_the_view_the_service_plans(monkeypatch: pytest.MonkeyPatch) -> None:
+    # With a budget that has room for the nadir view, the stage-by-stage timing and the naive
+    # pipeline run it too, and find what `Pipeline.detect` finds.
+    import numpy as np
+
+    from benchmarks.inprocess import NaivePipeline, service_pipeline, staged_detect
+    from fisheye import load_camera
+    from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
+
+    monkeypatch.setenv("FISHLOC_MAX_VIEW_PIXELS", "1000000")
+    pipeline = service_pipeline(DEFAULT_MODEL_PATH, 1)
+    camera = load_camera(DEMO_CAMERA_PATH)
+    data = (Path(__file__).resolve().parents[2] / "samples" / "000001.jpg").read_bytes()
+    images, _, frame_camera = NaivePipeline.full_decode_input(data, pipeline, camera)
+    plan = pipeline.plan(frame_camera)
+    assert plan is not None and plan.nadir is not None and len(images) == 2
+    threshold = pipeline.info.default_min_score
+    nadir_runs: list[tuple[int, ...]] = []
+    run_boxes = pipeline.model.run_boxes
+
+    def counted(image: np.ndarray) -> Any:
+        nadir_runs.append(image.shape)
+        return run_boxes(image)
+
+    monkeypatch.setattr(pipeline.model, "run_boxes", counted)
+    _, staged = staged_detect(pipeline, data, camera, threshold)
+    assert nadir_runs == [(plan.nadir.side, plan.nadir.side, 3)]  # the stages ran the nadir view
+    served = pipeline.detect(data, camera, min_score=threshold).detections
+    np.testing.assert_allclose(staged.cxcywh, served.cxcywh, atol=1e-6)
+    naive = NaivePipeline(DEFAULT_MODEL_PATH, pipeline, camera).detect(data, threshold)
+    assert len(naive.scores) >= len(served.scores) - 1  # full decode, box-side feet: nearly the same people
