@@ -207,8 +207,7 @@ class ModelRunner:
     def point(self, mapping: InputMapping) -> OperatingPoint:
         """The operating point a frame seen through `mapping` runs at: its view's own
         (`ModelInfo.point_for`), with this runner's NMS IoU where one was given."""
-        own = self.model.info.point_for(mapping_layout(mapping))
-        return own if self.nms_iou is None else OperatingPoint(own.min_score, self.nms_iou)
+        return self.model.info.point_for(mapping_layout(mapping), self.nms_iou)
 
     def outputs(self, frames_rgb: Iterable[NDArray[np.uint8]], cameras: Sequence[FisheyeCamera]
                 ) -> list[FrameOutputs]:

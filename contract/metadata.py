@@ -115,10 +115,11 @@ class ModelInfo:
         if len(set(layouts)) != len(layouts):
             raise ValueError(f"view layouts named twice: {layouts}")
 
-    def point_for(self, layout: str | None) -> OperatingPoint:
+    def point_for(self, layout: str | None, nms_iou: float | None = None) -> OperatingPoint:
         """The operating point of a view of `layout` (None: not a planned view): its own where the
-        model has one, else the model's."""
-        return dict(self.view_points).get(layout or "", OperatingPoint(self.default_min_score, self.nms_iou))
+        model has one, else the model's; with `nms_iou` (a caller's) in place of the point's."""
+        own = dict(self.view_points).get(layout or "", OperatingPoint(self.default_min_score, self.nms_iou))
+        return own if nms_iou is None else OperatingPoint(own.min_score, nms_iou)
 
     @property
     def input_wh(self) -> tuple[int, int]:

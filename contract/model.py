@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -132,21 +133,29 @@ class OnnxModel:
         self.info = parse_metadata(props, str(self.path), hashlib.sha256(data).hexdigest())
         self.has_foot = _check_signature(self.session, self.path, self.info)
         self._outputs = ["boxes", "scores", FOOT_OUTPUT] if self.has_foot else ["boxes", "scores"]
-        self._boxes_session = self._boxes_only_session(data, options)
+        # The session of the graph cut to boxes and scores (`run_boxes`), made on first use: only a
+        # view with the nadir view needs it. Where it cannot pay, the full session serves.
+        self._cut: tuple[bytes, ort.SessionOptions] | None = (
+            (data, options) if self.has_foot and self.info.planned and not threads.allow_spinning else None)
+        self._boxes_session: ort.InferenceSession | None = None
+        self._cut_lock = threading.Lock()
 
-    def _boxes_only_session(self, data: bytes, options: ort.SessionOptions) -> ort.InferenceSession | None:
+    def _boxes_only_session(self) -> ort.InferenceSession | None:
         """A planned model's nadir view places its people by the box side: a second session of the
         graph cut to `boxes` and `scores` skips the foot branch there (onnxruntime runs every node
         of a graph whatever outputs are asked for; 17 against 29 ms for the 448 px crop, README
         "The nadir view ..."). None where there is nothing to skip, or where the two sessions'
         thread pools would spin against each other (`allow_spinning`): the full session serves."""
-        if not (self.has_foot and self.info.planned) or self.threads.allow_spinning:
-            return None
-        try:
-            return ort.InferenceSession(_boxes_only(data), sess_options=options,
-                                        providers=["CPUExecutionProvider"])
-        except Exception:  # a graph onnx cannot cut: the full session serves the nadir view too
-            return None
+        with self._cut_lock:
+            if self._cut is not None:
+                data, options = self._cut
+                self._cut = None
+                try:
+                    self._boxes_session = ort.InferenceSession(
+                        _boxes_only(data), sess_options=options, providers=["CPUExecutionProvider"])
+                except Exception:  # a graph onnx cannot cut: the full session serves the nadir view too
+                    self._boxes_session = None
+            return self._boxes_session
 
     def blank_input(self) -> NDArray[np.uint8]:
         """An input of the model's shape filled with its pad value (for warm-up)."""
@@ -183,9 +192,10 @@ class OnnxModel:
     def run_boxes(self, image: NDArray[np.uint8]) -> RawOutputs:
         """(H, W, 3) uint8 RGB input -> its boxes and scores alone (`foot` None), without running
         the foot branch where the graph has one."""
-        if self._boxes_session is None:
+        session = self._boxes_only_session()
+        if session is None:
             return dataclasses.replace(self.run(image), foot=None)
         self._check_input(image[None])
         boxes, scores = (np.asarray(out[0], dtype=np.float32)
-                         for out in self._boxes_session.run(["boxes", "scores"], {"image": image[None]}))
+                         for out in session.run(["boxes", "scores"], {"image": image[None]}))
         return RawOutputs(boxes, scores)

@@ -442,13 +442,27 @@ def _nadir_piece(camera: FisheyeCamera, canvas_wh: tuple[int, int], reference: V
     `nadir_view_fraction` of the image circle's radius about the principal point, at
     `nadir_scale` times the trained strip's rows per px of that radius (its side rounded up to the
     stride: 448 px at the defaults, whatever the camera)."""
-    if config.nadir_fraction is None:
+    side = nadir_side(reference, config)
+    if side is None or config.nadir_fraction is None:
         return None
     circle = camera.image_circle_radius_px()
-    half = config.nadir_view_fraction * circle
-    side = _ceil_to(2 * half * config.nadir_scale * reference.rows / circle, STRIDE)
     pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
-    return NadirPiece(pp, half, side, canvas_wh[0] + STRIDE, config.nadir_fraction * circle)
+    return NadirPiece(pp, config.nadir_view_fraction * circle, side, canvas_wh[0] + STRIDE,
+                      config.nadir_fraction * circle)
+
+
+def nadir_side(reference: ViewReference, config: ViewPlanConfig) -> int | None:
+    """The nadir view's side in input px, the same for every camera (None where `config` asks for
+    no nadir view)."""
+    if config.nadir_fraction is None:
+        return None
+    return _ceil_to(2 * config.nadir_view_fraction * config.nadir_scale * reference.rows, STRIDE)
+
+
+def may_have_nadir(reference: ViewReference, config: ViewPlanConfig) -> bool:
+    """Whether a camera whose canvas is the trained strip gets the nadir view within the budget."""
+    side = nadir_side(reference, config)
+    return side is not None and reference.pixels + side ** 2 <= config.max_pixels
 
 
 def _with_pieces(bands: list[ViewBand]) -> list[ViewBand]:

@@ -28,9 +28,9 @@ from contract import (
     view_inputs,
 )
 from contract import select_detections as select_raw
-from contract.views import DEFAULT_VIEW, mapping_layout, view_plan
+from contract.views import DEFAULT_VIEW, mapping_layout, view_plan, view_reference
 from fisheye import FisheyeCamera, cxcywh_to_corners, foot_points, radial_angles_rad
-from fisheye.view_plan import ViewPlan, ViewPlanConfig, ViewPlanError
+from fisheye.view_plan import ViewPlan, ViewPlanConfig, ViewPlanError, may_have_nadir
 from service.frame_decode import DecodedFrame, FrameError, check_frame_size, decode_frame, read_header
 from service.result import DetectionResult, Detections
 
@@ -99,9 +99,12 @@ class Pipeline:
     def warm_up(self, runs: int = 2) -> None:
         """Run the model on blank inputs so the first real frame does not pay for lazy set-up."""
         blank = self.model.blank_input()
+        # the nadir view's session too (made on first use), where the budget gives cameras the view
+        nadir = self.info.planned and may_have_nadir(view_reference(self.info), self.config.view)
         for _ in range(runs):
             self.model.run(blank)
-            self.model.run_boxes(blank)  # the nadir view's session, where the model has one
+            if nadir:
+                self.model.run_boxes(blank)
 
     def detect(self, data: bytes, camera: FisheyeCamera, *, min_score: float | None = None,
                frame_id: str | None = None) -> DetectionResult:
@@ -164,8 +167,7 @@ class Pipeline:
     def point(self, layout: str | None) -> OperatingPoint:
         """The operating point of a view of `layout` (`ViewPlan.layout`; None: a fixed view): the
         model's own for it (`ModelInfo.point_for`), with the configured NMS IoU where one is set."""
-        own = self.info.point_for(layout)
-        return own if self.config.nms_iou is None else OperatingPoint(own.min_score, self.config.nms_iou)
+        return self.info.point_for(layout, self.config.nms_iou)
 
     def select(self, raw: RawOutputs, mapping: InputMapping, threshold: float,
                camera: FisheyeCamera) -> FrameDetections:

@@ -277,8 +277,10 @@ def test_the_nadir_view_runs_without_the_foot_branch(tmp_path: Path, spinning: b
     model = OnnxModel(path, SessionThreads(1, allow_spinning=spinning))
     image = np.zeros((64, 96, 3), dtype=np.uint8)
     image[20:30, 40:50] = 255
+    # the cut graph's session is made on first use, and only where it pays
+    assert model._boxes_session is None and (model._cut is None) is spinning
     full, boxes_only = model.run(image), model.run_boxes(image)
-    assert (model._boxes_session is None) is spinning  # the cut graph's session, where it pays
+    assert (model._boxes_session is None) is spinning and model._cut is None
     assert boxes_only.foot is None and full.foot is not None
     np.testing.assert_array_equal(boxes_only.boxes, full.boxes)
     np.testing.assert_array_equal(boxes_only.scores, full.scores)
@@ -292,3 +294,12 @@ def test_the_nadir_view_runs_without_the_foot_branch(tmp_path: Path, spinning: b
                               np.zeros((side, side, 3), np.uint8)], mapping)
     assert merged.foot is not None and np.isfinite(merged.foot).all() and len(merged.scores) == 2
     assert merge_outputs([full, boxes_only], mapping).foot is not None
+
+
+def test_warm_up_makes_the_nadir_session_only_where_the_budget_gives_the_view(tmp_path: Path) -> None:
+    path = save_polar_double(tmp_path / "planned.onnx", foot=True, planned=True)
+    for nadir_fraction, made in ((None, False), (0.2, True)):
+        model = OnnxModel(path, SessionThreads(1))
+        view = dataclasses.replace(DEFAULT_VIEW, nadir_fraction=nadir_fraction)
+        Pipeline(model, PipelineConfig(view=view)).warm_up(runs=1)
+        assert (model._boxes_session is not None) is made

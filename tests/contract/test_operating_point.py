@@ -121,6 +121,7 @@ def test_view_operating_points_round_trip_and_fall_back_to_the_models_own() -> N
     assert parse_metadata(metadata_props(info), "m.onnx") == info
     assert info.point_for("1band+nadir") == OperatingPoint(0.95, 0.5)
     assert info.point_for("2band+nadir") == info.point_for(None) == OperatingPoint(0.3, 0.35)
+    assert info.point_for("1band+nadir", nms_iou=0.45) == OperatingPoint(0.95, 0.45)  # a caller's IoU
     assert info.public()["view_operating_points"] == {"1band+nadir": {"min_score": 0.95, "nms_iou": 0.5}}
 
 
