@@ -4,6 +4,12 @@ The size is read from the JPEG/PNG header before anything is decoded, so a small
 huge picture (a decompression bomb) is refused without allocating it. A JPEG much larger than the
 model input is decoded at 1/2, 1/4 or 1/8 scale by libjpeg's DCT scaling, which skips most of the
 decoding work instead of decoding every pixel and then throwing most of them away.
+
+JPEGs are decoded by libjpeg-turbo's TurboJPEG API (simplejpeg), straight to RGB and with the GIL
+released: the same pixels as OpenCV's decoder bit for bit, in less time (a 2952 x 2952 frame at
+1/2 scale: 10.2 against 17.2 ms with OpenCV's decode and colour swap; README, "Benchmark"). A JPEG
+it refuses (truncated, or a recoverable error it treats as fatal) goes to OpenCV's decoder, which
+answers as it always has.
 """
 
 from __future__ import annotations
@@ -14,6 +20,7 @@ from typing import Literal
 
 import cv2
 import numpy as np
+import simplejpeg
 from numpy.typing import NDArray
 
 ImageFormat = Literal["jpeg", "png"]
@@ -152,6 +159,29 @@ def decode_frame(data: bytes, input_size: int, max_pixels: int,
     header = read_header(data) if header is None else header
     check_frame_size(header, max_pixels)
     reduction = pick_reduction(header.size_wh, input_size) if header.format == "jpeg" else 1
+    rgb = _turbo_decode(data, header, reduction) if header.format == "jpeg" else None
+    if rgb is None:
+        rgb = decode_with_opencv(data, header, reduction)
+    return DecodedFrame(rgb=rgb, frame_wh=header.size_wh, reduction=reduction)
+
+
+def _turbo_decode(data: bytes, header: FrameHeader, reduction: int) -> NDArray[np.uint8] | None:
+    """A JPEG decoded by TurboJPEG at 1/`reduction` scale (libjpeg's scaled size is the header's
+    divided exactly, so asking for that size picks the same DCT scaling as OpenCV's reduced modes);
+    None where TurboJPEG refuses it or gives another size."""
+    expected_wh = (header.width // reduction, header.height // reduction)
+    try:
+        rgb = simplejpeg.decode_jpeg(data, "RGB", min_width=expected_wh[0], min_height=expected_wh[1])
+    except ValueError:
+        return None
+    if (rgb.shape[1], rgb.shape[0]) != expected_wh or rgb.ndim != 3 or rgb.shape[2] != 3:
+        return None
+    return np.ascontiguousarray(rgb, dtype=np.uint8)
+
+
+def decode_with_opencv(data: bytes, header: FrameHeader, reduction: int) -> NDArray[np.uint8]:
+    """A JPEG or PNG decoded by OpenCV at 1/`reduction` scale (a JPEG's DCT scaling); FrameError
+    `bad_image` where it cannot be."""
     flags = _BASE_FLAGS | (_REDUCED_FLAGS[reduction] if reduction > 1 else cv2.IMREAD_COLOR)
     buffer = np.frombuffer(data, dtype=np.uint8)
     try:
@@ -168,5 +198,4 @@ def decode_frame(data: bytes, input_size: int, max_pixels: int,
             f"{header.width}x{header.height}",
         )
     rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
-    return DecodedFrame(rgb=np.ascontiguousarray(rgb, dtype=np.uint8), frame_wh=header.size_wh,
-                        reduction=reduction)
+    return np.ascontiguousarray(rgb, dtype=np.uint8)

@@ -62,10 +62,11 @@ def test_bombs_are_refused_without_decoding(server: LiveServer, samples: Samples
     """The pixel limit is applied to the header: the decoder is never called for a bomb."""
     import service.frame_decode
 
-    def no_decoding(*_args: object) -> None:
+    def no_decoding(*_args: object, **_kwargs: object) -> None:
         raise AssertionError("a frame over the pixel limit reached the decoder")
 
     monkeypatch.setattr(service.frame_decode.cv2, "imdecode", no_decoding)
+    monkeypatch.setattr(service.frame_decode.simplejpeg, "decode_jpeg", no_decoding)
     case = next(case for case in ALL_CASES if case.name == name)
     response = raw_request(server.url, "POST", case.path, case.body(samples), case.headers)
     assert response.status == 413 and response.error_code == "image_too_large"

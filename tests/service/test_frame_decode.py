@@ -88,3 +88,68 @@ def test_unreadable_headers(data: bytes, code: str) -> None:
     with pytest.raises(FrameError) as caught:
         read_header(data)
     assert caught.value.code == code
+
+
+def _photo_jpeg(width: int, height: int, **params: int) -> bytes:
+    """A smooth picture with edges (JPEG's usual content, unlike noise) encoded with `params`."""
+    y, x = np.mgrid[0:height, 0:width].astype(np.float32)
+    image = np.stack([127 + 120 * np.sin(x / 23), 127 + 120 * np.cos(y / 17), (x + y) % 256], -1)
+    image[height // 3:height // 2, width // 4:width // 2] = (20, 200, 90)
+    flags = [number for key, value in params.items() for number in (getattr(cv2, key), value)]
+    return bytes(cv2.imencode(".jpg", image.astype(np.uint8), flags)[1].tobytes())
+
+
+@pytest.mark.parametrize(("params", "reduction"), [
+    ({}, 1), ({}, 2), ({}, 4), ({}, 8),
+    ({"IMWRITE_JPEG_PROGRESSIVE": 1}, 4),
+    ({"IMWRITE_JPEG_SAMPLING_FACTOR": cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444}, 2),
+    ({"IMWRITE_JPEG_SAMPLING_FACTOR": cv2.IMWRITE_JPEG_SAMPLING_FACTOR_422}, 2),
+])
+def test_turbo_decode_gives_opencvs_pixels(params: dict[str, int], reduction: int) -> None:
+    """The TurboJPEG decode is OpenCV's reduced decode and colour swap, bit for bit."""
+    data = _photo_jpeg(1024, 768, **params)
+    frame = decode_frame(data, input_size=1024 // reduction, max_pixels=10**7)
+    assert frame.reduction == reduction
+    modes = {1: cv2.IMREAD_COLOR, 2: cv2.IMREAD_REDUCED_COLOR_2, 4: cv2.IMREAD_REDUCED_COLOR_4,
+             8: cv2.IMREAD_REDUCED_COLOR_8}
+    flags = cv2.IMREAD_IGNORE_ORIENTATION | modes[reduction]
+    expected = cv2.cvtColor(cv2.imdecode(np.frombuffer(data, np.uint8), flags), cv2.COLOR_BGR2RGB)
+    assert frame.rgb.shape == expected.shape and np.array_equal(frame.rgb, expected)
+
+
+def test_grey_jpeg_decodes_to_three_equal_channels() -> None:
+    grey = cv2.cvtColor(cv2.imdecode(np.frombuffer(_photo_jpeg(320, 240), np.uint8), cv2.IMREAD_COLOR),
+                        cv2.COLOR_BGR2GRAY)
+    data = bytes(cv2.imencode(".jpg", grey)[1].tobytes())
+    frame = decode_frame(data, input_size=320, max_pixels=10**7)
+    assert frame.rgb.shape == (240, 320, 3)
+    red, green, blue = (frame.rgb[..., k] for k in range(3))
+    assert np.array_equal(red, green) and np.array_equal(green, blue)
+
+
+def test_a_jpeg_turbojpeg_refuses_goes_to_opencv(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A truncated JPEG (TurboJPEG refuses it outright) is answered as OpenCV's decoder answers it."""
+    import service.frame_decode as frame_decode
+
+    data = _photo_jpeg(640, 480)
+    truncated = data[:len(data) * 2 // 3]
+    calls: list[int] = []
+    real = frame_decode.simplejpeg.decode_jpeg
+    with pytest.raises(ValueError):
+        real(truncated, "RGB")
+
+    def counting(*args: object, **kwargs: object) -> object:
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(frame_decode.simplejpeg, "decode_jpeg", counting)
+    flags = cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION
+    expected = cv2.imdecode(np.frombuffer(truncated, np.uint8), flags)
+    if expected is None:
+        with pytest.raises(FrameError) as caught:
+            decode_frame(truncated, input_size=640, max_pixels=10**7)
+        assert caught.value.code == "bad_image"
+    else:
+        frame = decode_frame(truncated, input_size=640, max_pixels=10**7)
+        assert np.array_equal(frame.rgb, cv2.cvtColor(expected, cv2.COLOR_BGR2RGB))
+    assert calls == [1]
