@@ -69,8 +69,8 @@ class InputMapping(Protocol):
         ...
 
     def box_side_feet(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_]:
-        """(N,) which boxes take their foot point from the box side, whatever a `foot` output says
-        (the nadir view's: the network learnt its feet on the strip)."""
+        """(N,) which boxes take their foot point from the box (`contract.detect.nadir_feet`),
+        whatever a `foot` output says (the nadir view's: the network learnt its feet on the strip)."""
         ...
 
 

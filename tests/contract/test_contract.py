@@ -178,7 +178,7 @@ def test_an_unplannable_camera_is_a_frame_error(tmp_path: Path, camera_change: d
 
 def test_the_nadir_view_reads_a_person_below_the_lens_as_an_upright_crop(tmp_path: Path) -> None:
     # The double's box lands on the bright disc in the nadir view too; that box comes back centred on
-    # the disc, radius-aligned, its foot on its own side nearest the principal point.
+    # the disc, radius-aligned, its foot halfway from its side nearest the principal point to its centre.
     from contract.views import upright_to_radius_aligned
 
     path = save_polar_double(tmp_path / "planned.onnx", foot=True, planned=True)
@@ -199,7 +199,8 @@ def test_the_nadir_view_reads_a_person_below_the_lens_as_an_upright_crop(tmp_pat
                   if np.linalg.norm(box[:2] - uv) < 3.0 and np.allclose(box[2:], expected[2:], rtol=0.05)]
     assert len(from_nadir) == 1
     box = found.cxcywh[from_nadir[0]]
-    np.testing.assert_allclose(found.foot_px[from_nadir[0]], foot_points(box[None], pp)[0], atol=1e-6)
+    side = foot_points(box[None], pp)[0]
+    np.testing.assert_allclose(found.foot_px[from_nadir[0]], (side + box[:2]) / 2, atol=1e-6)
     # without the nadir view the strip alone reads the frame: no box of that size
     strip_only = Pipeline(model, PipelineConfig(view=dataclasses.replace(DEFAULT_VIEW, scales=(1.0,),
                                                                          nadir_fraction=None)))

@@ -8,7 +8,7 @@ import pytest
 from polar_double import METADATA
 
 from contract import ModelError, PolarInput, RawOutputs, parse_metadata, select_detections
-from contract.detect import FOOT_FUSION_IOU, FOOT_FUSION_SCORE
+from contract.detect import FOOT_FUSION_IOU, FOOT_FUSION_SCORE, weighted_medians
 from contract.metadata import LEGACY_NMS_IOU
 from contract.views import strip_nms
 from detector.metrics import EvalFrame
@@ -35,7 +35,7 @@ def _raw(boxes: list[list[float]], scores: list[float], feet: list[list[float]])
                       np.asarray(feet, dtype=np.float32))
 
 
-def test_a_kept_detection_stands_at_the_score_weighted_foot_of_its_cluster() -> None:
+def test_a_kept_detection_stands_at_the_score_weighted_median_foot_of_its_cluster() -> None:
     raw = _raw(
         [[100, 20, 110, 40],   # a person's best cell
          [200, 10, 210, 30],   # another person
@@ -43,15 +43,26 @@ def test_a_kept_detection_stands_at_the_score_weighted_foot_of_its_cluster() -> 
          [100, 27, 110, 47],   # ... one suppressed by the NMS (IoU 0.48) but too far off to vote
          [101, 20, 111, 40],
          [100, 20, 110, 40]],  # ... one too weak to vote
-        [0.9, 0.8, 0.6, 0.5, 0.3, 0.9 * FOOT_FUSION_SCORE * 0.9],
-        [[105, 40], [205, 30], [106, 44], [150, 60], [102, 38], [150, 60]])
+        [0.9, 0.8, 0.6, 0.5, 0.4, 0.9 * FOOT_FUSION_SCORE * 0.9],
+        [[105, 40], [205, 30], [106, 44], [150, 60], [107, 45], [150, 60]])
     found = select_detections(raw, PolarInput(GRID), PP, min_score=0.25, nms_iou=0.45)
     assert len(found.scores) == 2 and found.foot_px is not None
-    weights = np.array([0.9, 0.6, 0.3])
-    expected = (weights[:, None] * np.array([[105, 40], [106, 44], [102, 38]])).sum(0) / weights.sum()
-    np.testing.assert_allclose(found.foot_px[0], GRID.strip_to_frame(expected[None])[0], atol=1e-6)
+    # votes 105 (0.9), 106 (0.6), 107 (0.4) and 40, 44, 45: half the weight (0.95) is reached at the
+    # second of each, not at the best cell's own foot nor at the mean (105.7, 42.3)
+    np.testing.assert_allclose(found.foot_px[0], GRID.strip_to_frame(np.array([[106.0, 44.0]]))[0], atol=1e-6)
     np.testing.assert_allclose(found.foot_px[1], GRID.strip_to_frame(np.array([[205.0, 30.0]]))[0], atol=1e-6)
     assert 0.48 < FOOT_FUSION_IOU < 0.82  # the fourth candidate's IoU, the fifth's
+
+
+def test_weighted_medians_per_group() -> None:
+    groups = np.array([2, 0, 0, 0, 2, 3])
+    values = np.array([5.0, 3.0, 1.0, 2.0, 7.0, 4.0])
+    weights = np.array([1.0, 1.0, 1.0, 5.0, 3.0, 0.0])
+    # group 0: 1 (1), 2 (5), 3 (1) -> 2; group 1: none; group 2: 5 (1), 7 (3) -> 7; group 3: no weight
+    np.testing.assert_array_equal(weighted_medians(groups, values, weights, 4), [2.0, np.nan, 7.0, np.nan])
+    assert np.isnan(weighted_medians(np.zeros(0, int), np.zeros(0), np.zeros(0), 2)).all()
+    one_outlier = weighted_medians(np.zeros(4, int), np.array([10.0, 10.5, 11.0, 90.0]), np.ones(4), 1)
+    assert one_outlier[0] == 10.5  # a neighbour's feet do not pull it
 
 
 def test_without_nms_every_output_keeps_its_own_foot() -> None:
