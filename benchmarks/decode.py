@@ -1,7 +1,7 @@
 """JPEG decoding, TurboJPEG against OpenCV, at the scale the service decodes a camera's frames.
 
     python -m benchmarks.decode --frames data/bench2952 --frames data/bench2048 --frames data/bench1080 \\
-        --budget 800000 --budget 1000000 --runs 200 --json decode.json
+        --budget 900000 --budget 4000000 --runs 200 --json decode.json
 
 For each folder of frames (one camera's size) and each view budget (`fishloc serve
 --max-view-pixels`), the shipped model's plan gives the reduced size the frames are decoded at
@@ -64,7 +64,8 @@ def measure(folder: str, budget: int, runs: int, model: OnnxModel) -> dict[str, 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.decode", description=__doc__.split("\n")[0])
     parser.add_argument("--frames", action="append", required=True, help="folder of frames of one size")
-    parser.add_argument("--budget", action="append", type=int, help="view budget in px (default 800000)")
+    parser.add_argument("--budget", action="append", type=int, metavar="PIXELS",
+                        help="view budget in px (default: the service's)")
     parser.add_argument("--runs", type=int, default=200, help="decodes per decoder and row (default 200)")
     parser.add_argument("--model", default=str(DEFAULT_MODEL_PATH), help="model whose plan sets the size")
     parser.add_argument("--json", type=Path, help="also write the rows here")
@@ -78,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     print("|---|---|---|---|---|---|")
     rows = []
     for folder in args.frames:
-        for budget in args.budget or [800_000]:
+        for budget in args.budget or [ViewPlanConfig().max_pixels]:
             row = measure(folder, budget, args.runs, model)
             rows.append(row)
             ms = row["ms"]

@@ -82,6 +82,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="give the foot output its own copy of the neck, started from the "
                             "detector's and trained on the foot loss alone (detector.yolox.foot.FootNeck); "
                             "implies --foot")
+    polar.add_argument("--foot-neck-top-down", action="store_true",
+                       help="keep the top-down path of the foot's own neck alone (neck.TopDownFPN: the "
+                            "foot branch at a fraction of its cost); implies --foot-neck")
     polar.add_argument("--foot-refine-steps", type=int, default=None, metavar="N",
                        help="passes of the foot refiner (default: the checkpoint's, else 1)")
     polar.add_argument("--view", choices=("polar", "fisheye"), default=None,
@@ -170,7 +173,7 @@ def yolox_view(args: argparse.Namespace) -> tuple[YoloxDetectorConfig, StripAugm
     strip = {} if args.strip is None else dict(zip(("input_size", "polar_width", "polar_overlap"),
                                                    args.strip, strict=True))
     if args.network != YOLOX_NANO:
-        if args.view == "fisheye" or args.inner_head or args.foot or args.foot_refine or args.foot_neck:
+        if args.view == "fisheye" or args.inner_head or _wants_foot(args):
             raise ValueError(f"--network {args.network} reads the polar view, with no foot or inner head")
         name = f"fishloc-{args.network}-polar"
         return (PolarDetectorConfig(**strip, network=args.network, model_name=name),
@@ -184,17 +187,23 @@ def default_freeze(network: str) -> tuple[str, ...]:
     return FinetuneConfig().freeze if network == YOLOX_NANO else NANODET_STAGES[:1]
 
 
+def _wants_foot(args: argparse.Namespace) -> bool:
+    """Whether the command line asks for the foot output or a part of it."""
+    return bool(args.foot or args.foot_refine or args.foot_neck or args.foot_neck_top_down)
+
+
 def initial_network(args: argparse.Namespace, model_config: YoloxDetectorConfig
                     ) -> tuple[YoloxDetectorConfig, YoloxNano | NanoDetPlus]:
     """The network `--init-from` starts from and its config: the COCO ONNX's person network in
     `model_config`, or a polar checkpoint's own network and strip; `--foot` adds the foot branch."""
     if Path(args.init_from).suffix.lower() != ".pt":
-        if args.foot or args.foot_refine or args.foot_neck:
+        if _wants_foot(args):
             if not isinstance(model_config, PolarDetectorConfig):
                 raise ValueError("--foot is an option of the polar view")
             model_config = replace(model_config, foot=True, foot_refine=bool(args.foot_refine),
                                    foot_refine_steps=args.foot_refine_steps or 1,
-                                   foot_neck=bool(args.foot_neck))
+                                   foot_neck=bool(args.foot_neck or args.foot_neck_top_down),
+                                   foot_neck_top_down=bool(args.foot_neck_top_down))
         if isinstance(model_config, PolarDetectorConfig) and model_config.network != YOLOX_NANO:
             return model_config, init_network_from_pretrained(args.init_from, model_config)
         return model_config, init_from_pretrained(args.init_from, model_config)
@@ -207,13 +216,13 @@ def initial_network(args: argparse.Namespace, model_config: YoloxDetectorConfig
                          "and --zoom are options of a start from the COCO ONNX")
     network = checkpoint.build(args.init_from)
     if isinstance(network, NanoDetPlus):
-        if args.foot or args.foot_refine or args.foot_neck:
+        if _wants_foot(args):
             raise ValueError(f"{args.init_from} holds a NanoDet-Plus, which has no foot branch")
         return checkpoint.config, network
     if not isinstance(network, YoloxNano):
         raise ValueError(f"{args.init_from} holds no YOLOX network")
     model_config = checkpoint.config
-    if (args.foot or args.foot_refine or args.foot_neck) and not model_config.foot:
+    if _wants_foot(args) and not model_config.foot:
         model_config, network = replace(model_config, foot=True), network.with_foot()
     if args.foot_refine and not model_config.foot_refine:
         model_config, network = replace(model_config, foot_refine=True), network.with_foot_refiner()
@@ -222,8 +231,11 @@ def initial_network(args: argparse.Namespace, model_config: YoloxDetectorConfig
             raise ValueError("--foot-refine-steps needs a foot refiner (--foot-refine)")
         model_config = replace(model_config, foot_refine_steps=args.foot_refine_steps)
         network = network.with_foot_refine_steps(args.foot_refine_steps)
-    if args.foot_neck and not model_config.foot_neck:
+    if (args.foot_neck or args.foot_neck_top_down) and not model_config.foot_neck:
         model_config, network = replace(model_config, foot_neck=True), network.with_foot_neck()
+    if args.foot_neck_top_down and not model_config.foot_neck_top_down:
+        model_config = replace(model_config, foot_neck_top_down=True)
+        network = network.with_foot_neck_top_down()
     return model_config, network
 
 

@@ -23,7 +23,7 @@ its own size of the principal point is smeared across the turn (on the validatio
 33 people centred within 0.08 of the image circle's radius it found one from score 0.05, none at
 the threshold). Where the budget allows,
 the plan adds a **nadir view** (`NadirPiece`): the disc about the principal point as an upright
-square crop of the frame, at 1.5x the strip's radial scale, a second input of the same network.
+square crop of the frame, at 1.25x the strip's radial scale, a second input of the same network.
 It reports the people centred within `nadir_fraction` of the image circle's radius (the strip keeps
 reporting them too; the detector's NMS in the frame merges the two) and shows `nadir_view_fraction`,
 so that a person centred at its edge is whole in it.
@@ -80,16 +80,20 @@ class ViewPlanConfig:
     # so a person centred there is whole in it; None: the inner band shows the whole disc. 0.6 was
     # chosen over the whole disc on the real and rendered sets together (README, "View planning").
     band_margin: float | None = 0.6
-    max_pixels: int = 800_000  # 0.5.0's strip (745 472 px) and no more: its latency
+    # The trained strip (745 472 px) and the nadir view (384 x 384 px): 0.5.0's latency end to end
+    # with 0.7.0's lighter foot branch (0.97-0.99x its time at 2952², 0.98x at 2048² and 1080²;
+    # README, "A lighter foot neck"); 800 000, the strip alone, from 0.6.1 to 0.6.2.
+    max_pixels: int = 900_000
     gap_rows: int = STRIDE
     # The nadir view (module docstring; README, "The nadir view and a faster graph"): the people it
     # reports, what it shows (fractions of the image circle's radius) and its scale over the strip's
-    # radial one; None: none. 0.35 and 1.5 were chosen over 0.25 and 0.3, 1.25 and 1.95 on the real
-    # and rendered sets together. It costs 1.18x 0.5.0's time end to end beside the strip: the
-    # default budget leaves it out (`max_pixels` 1 000 000 takes it in).
+    # radial one; None: none. 0.35 was chosen over 0.25 and 0.3 on the real and rendered sets
+    # together; of the scales, 1.5 (448 px) found the most below the lens, 1.25 (384 px; recall
+    # there 0.54 against 0.57 on the unseen renders, scenes4 AP50 0.451 against 0.461, Lunch3 the
+    # same) is the one whose time fits the default budget's: since 0.7.0 the default.
     nadir_fraction: float | None = 0.2
     nadir_view_fraction: float = 0.35
-    nadir_scale: float = 1.5
+    nadir_scale: float = 1.25
     # With a nadir view the strip (its innermost band) may start this fraction of the image circle's
     # radius out: the nadir view shows the disc within. None: the strip starts at the principal point.
     nadir_strip_from: float | None = None
@@ -441,7 +445,7 @@ def _nadir_piece(camera: FisheyeCamera, canvas_wh: tuple[int, int], reference: V
     """The nadir view of `camera` (None where `config` asks for none): the square showing
     `nadir_view_fraction` of the image circle's radius about the principal point, at
     `nadir_scale` times the trained strip's rows per px of that radius (its side rounded up to the
-    stride: 448 px at the defaults, whatever the camera)."""
+    stride: 384 px at the defaults, whatever the camera)."""
     side = nadir_side(reference, config)
     if side is None or config.nadir_fraction is None:
         return None

@@ -50,7 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="do not add the demo camera to a new database")
     parser.add_argument("--max-view-pixels", type=int, metavar="PIXELS",
                         help="largest model input of a camera's planned view, width x height (a planned "
-                             "model only; env FISHLOC_MAX_VIEW_PIXELS; default 800000)")
+                             "model only; env FISHLOC_MAX_VIEW_PIXELS; default 900000)")
 
 
 def settings_from_args(args: argparse.Namespace) -> Settings:

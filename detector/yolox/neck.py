@@ -18,24 +18,22 @@ def upsample2(x: Tensor) -> Tensor:
     return functional.interpolate(x, scale_factor=2.0, mode="nearest")
 
 
-class PAFPN(nn.Module):
-    """Backbone features (strides 8, 16, 32; `channels` c3, c4, c5) -> fused features, same shapes."""
+class TopDownFPN(nn.Module):
+    """The top-down path of `PAFPN` alone (its module names): backbone features (strides 8, 16, 32)
+    -> its stride-8 output, its stride-16 one and the stride-32 backbone feature, the shapes of
+    `PAFPN`'s outputs at a fraction of its cost (the bottom-up path is 41 % of it). The foot branch
+    reads it where `YoloxConfig.foot_neck_top_down` (README, "A lighter foot neck")."""
 
     def __init__(self, channels: tuple[int, int, int], depth: int, depthwise: bool) -> None:
         super().__init__()
         c3, c4, c5 = channels
-        # top-down
         self.lateral_conv0 = BaseConv(c5, c4, 1)
         self.c3_p4 = CSPLayer(2 * c4, c4, n=depth, shortcut=False, depthwise=depthwise)
         self.reduce_conv1 = BaseConv(c4, c3, 1)
         self.c3_p3 = CSPLayer(2 * c3, c3, n=depth, shortcut=False, depthwise=depthwise)
-        # bottom-up
-        self.bu_conv2 = conv_block(c3, c3, 3, 2, depthwise)
-        self.c3_n3 = CSPLayer(2 * c3, c4, n=depth, shortcut=False, depthwise=depthwise)
-        self.bu_conv1 = conv_block(c4, c4, 3, 2, depthwise)
-        self.c3_n4 = CSPLayer(2 * c4, c5, n=depth, shortcut=False, depthwise=depthwise)
 
-    def forward(self, features: tuple[Tensor, Tensor, Tensor]) -> tuple[Tensor, Tensor, Tensor]:
+    def top_down(self, features: tuple[Tensor, Tensor, Tensor]) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+        """(stride-8 output, stride-16 output, the stride-16 and stride-32 laterals)."""
         dark3, dark4, dark5 = features  # (B, c3, H/8, W/8), (B, c4, H/16, W/16), (B, c5, H/32, W/32)
 
         fpn_out0 = self.lateral_conv0(dark5)  # (B, c4, H/32, W/32)
@@ -45,6 +43,27 @@ class PAFPN(nn.Module):
         fpn_out1 = self.reduce_conv1(f_out0)  # (B, c3, H/16, W/16)
         f_out1 = torch.cat([upsample2(fpn_out1), dark3], dim=1)  # (B, 2 c3, H/8, W/8)
         pan_out2 = self.c3_p3(f_out1)  # (B, c3, H/8, W/8)
+        return pan_out2, f_out0, fpn_out1, fpn_out0
+
+    def forward(self, features: tuple[Tensor, Tensor, Tensor]) -> tuple[Tensor, Tensor, Tensor]:
+        pan_out2, f_out0, _, _ = self.top_down(features)
+        return pan_out2, f_out0, features[2]
+
+
+class PAFPN(TopDownFPN):
+    """Backbone features (strides 8, 16, 32; `channels` c3, c4, c5) -> fused features, same shapes."""
+
+    def __init__(self, channels: tuple[int, int, int], depth: int, depthwise: bool) -> None:
+        super().__init__(channels, depth, depthwise)
+        c3, c4, c5 = channels
+        # bottom-up
+        self.bu_conv2 = conv_block(c3, c3, 3, 2, depthwise)
+        self.c3_n3 = CSPLayer(2 * c3, c4, n=depth, shortcut=False, depthwise=depthwise)
+        self.bu_conv1 = conv_block(c4, c4, 3, 2, depthwise)
+        self.c3_n4 = CSPLayer(2 * c4, c5, n=depth, shortcut=False, depthwise=depthwise)
+
+    def forward(self, features: tuple[Tensor, Tensor, Tensor]) -> tuple[Tensor, Tensor, Tensor]:
+        pan_out2, _, fpn_out1, fpn_out0 = self.top_down(features)
 
         p_out1 = torch.cat([self.bu_conv2(pan_out2), fpn_out1], dim=1)  # (B, 2 c3, H/16, W/16)
         pan_out1 = self.c3_n3(p_out1)  # (B, c4, H/16, W/16)

@@ -20,7 +20,7 @@ from detector.yolox.backbone import CSPDarknet
 from detector.yolox.blocks import BaseConv
 from detector.yolox.foot import FootHead, FootNeck
 from detector.yolox.head import YoloxHead
-from detector.yolox.neck import PAFPN
+from detector.yolox.neck import PAFPN, TopDownFPN
 
 STRIDES = (8, 16, 32)  # of the head levels, in output order
 PERSON = 0  # COCO class index
@@ -40,8 +40,12 @@ class YoloxConfig:
     foot_refine: bool = False  # and its second stage on the stride-8 features (FootRefiner)
     foot_refine_steps: int = 1  # passes of that stage, each about the previous one's point
     foot_neck: bool = False  # the foot branch reads its own copy of the neck (FootNeck)
+    # ... of its top-down path alone (neck.TopDownFPN; README, "A lighter foot neck")
+    foot_neck_top_down: bool = False
 
     def __post_init__(self) -> None:
+        if self.foot_neck_top_down and not self.foot_neck:
+            raise ValueError("foot_neck_top_down cuts the foot's own neck (foot_neck)")
         if self.num_classes < 1:
             raise ValueError(f"num_classes must be at least 1, got {self.num_classes}")
         if self.depth <= 0 or self.width <= 0:
@@ -88,7 +92,8 @@ class YoloxNano(nn.Module):
 
     @staticmethod
     def _foot_neck(config: YoloxConfig) -> FootNeck:
-        return FootNeck(PAFPN(config.level_channels, config.neck_depth, config.depthwise),
+        fpn = TopDownFPN if config.foot_neck_top_down else PAFPN
+        return FootNeck(fpn(config.level_channels, config.neck_depth, config.depthwise),
                         nn.ModuleList([BaseConv(c, config.head_width, 1) for c in config.level_channels]))
 
     def forward(self, images: Tensor) -> list[Tensor]:
@@ -146,6 +151,20 @@ class YoloxNano(nn.Module):
         necked.foot.features.stems.load_state_dict(necked.head.stems.state_dict())
         return necked
 
+    def with_foot_neck_top_down(self) -> YoloxNano:
+        """A copy whose foot neck keeps its top-down path alone (`neck.TopDownFPN`): its stride-8
+        output unchanged, the stride-16 and stride-32 levels of the foot branch read the path's
+        stride-16 output and the backbone's stride-32 feature in place of the bottom-up outputs
+        (so those levels answer differently until trained); every kept weight is copied."""
+        if self.foot is None or self.foot.features is None:
+            raise ValueError("a top-down foot neck cuts the foot's own neck (YoloxConfig.foot_neck)")
+        cut = YoloxNano(replace(self.config, foot_neck_top_down=True))
+        bottom_up = ("bu_conv2.", "c3_n3.", "bu_conv1.", "c3_n4.")
+        kept = {key: value for key, value in self.state_dict().items()
+                if not key.startswith(tuple(f"foot.features.neck.{name}" for name in bottom_up))}
+        cut.load_state_dict(kept, strict=True)
+        return cut.to(next(self.parameters()).device).train(self.training)
+
     def with_foot_refine_steps(self, steps: int) -> YoloxNano:
         """A copy whose foot refiner runs `steps` passes; every weight unchanged."""
         return self._grown(None, foot_refine_steps=steps)
@@ -186,7 +205,8 @@ class DetectorConfigRecord:
                            foot=bool(getattr(self, "foot", False)),
                            foot_refine=bool(getattr(self, "foot_refine", False)),
                            foot_refine_steps=int(getattr(self, "foot_refine_steps", 1)),
-                           foot_neck=bool(getattr(self, "foot_neck", False)))
+                           foot_neck=bool(getattr(self, "foot_neck", False)),
+                           foot_neck_top_down=bool(getattr(self, "foot_neck_top_down", False)))
 
     def to_dict(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in fields(self)}  # type: ignore[arg-type]

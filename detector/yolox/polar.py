@@ -55,6 +55,7 @@ class PolarDetectorConfig(DetectorConfigRecord):
     foot_refine: bool = False  # its second stage on the stride-8 features (foot.FootRefiner)
     foot_refine_steps: int = 1  # passes of that stage
     foot_neck: bool = False  # the foot reads its own copy of the neck (foot.FootNeck)
+    foot_neck_top_down: bool = False  # ... of its top-down path alone (neck.TopDownFPN)
     # The graph (0.6 on): the top K among peak cells only, and an input of any height and width
     # whose view the service plans per camera (DESIGN.md's planned views; `fishloc.view_planned`).
     peaks: bool = False
@@ -79,6 +80,8 @@ class PolarDetectorConfig(DetectorConfigRecord):
             raise ValueError(f"inner_fraction must lie in [0, 1), got {self.inner_fraction}")
         if (self.foot_refine or self.foot_neck) and not self.foot:
             raise ValueError("a foot refiner or neck needs the foot output (foot)")
+        if self.foot_neck_top_down and not self.foot_neck:
+            raise ValueError("foot_neck_top_down cuts the foot's own neck (foot_neck)")
         if not 1 <= self.foot_refine_steps <= 4:
             raise ValueError(f"foot_refine_steps must lie in [1, 4], got {self.foot_refine_steps}")
         if self.foot and self.inner_fraction > 0:
@@ -163,7 +166,10 @@ def init_from_pretrained(path: str, config: YoloxSize) -> YoloxNano:
         footed = person.with_foot()
         if config.foot_refine:
             footed = footed.with_foot_refiner().with_foot_refine_steps(config.foot_refine_steps)
-        return footed.with_foot_neck() if config.foot_neck else footed
+        if not config.foot_neck:
+            return footed
+        necked = footed.with_foot_neck()
+        return necked.with_foot_neck_top_down() if config.foot_neck_top_down else necked
     if isinstance(config, PolarDetectorConfig) and config.inner_fraction > 0:
         from detector.yolox.inner_head import InnerHeadYolox
 

@@ -60,7 +60,7 @@ class Settings(BaseSettings):
     keep_alive_timeout_s: int = Field(5, ge=1, description="idle time before a keep-alive connection closes")
     max_body_bytes: int = Field(32 * 1024 * 1024, ge=1024, description="largest encoded frame accepted")
     max_pixels: int = Field(40_000_000, ge=1, description="largest decoded frame (width × height)")
-    max_view_pixels: int = Field(800_000, ge=4096, le=64_000_000,
+    max_view_pixels: int = Field(900_000, ge=4096, le=64_000_000,
                                  description="largest model input a camera's planned view may take "
                                              "(width × height; a planned model only)")
     threads: int = Field(default_factory=cpu_budget, ge=1,

@@ -351,3 +351,47 @@ def test_bilinear_samples_are_grid_samples_border_padding(batch: int) -> None:
     features.requires_grad_(True)
     sample_bilinear(features, points, 8).sum().backward()
     assert features.grad is not None and points.grad is not None and points.grad.abs().sum() > 0
+
+
+def test_a_top_down_foot_neck_keeps_the_stride_8_features_and_drops_the_bottom_up_path(
+        footed: YoloxNano, toy_dataset: Callable[..., Path], tmp_path: Path) -> None:
+    from detector.yolox.neck import TopDownFPN
+
+    necked = footed.with_foot_refiner().with_foot_neck()
+    with torch.no_grad():  # a foot neck that differs from the detector's, so that a mix-up shows
+        assert necked.foot is not None and necked.foot.features is not None
+        for parameter in necked.foot.features.parameters():
+            parameter.mul_(1.1)
+    cut = necked.with_foot_neck_top_down()
+    assert cut.foot is not None and cut.foot.features is not None
+    assert type(cut.foot.features.neck) is TopDownFPN and cut.config.foot_neck_top_down
+    foot_keys = [key for key in cut.state_dict() if key.startswith("foot.features.neck.")]
+    assert foot_keys and not any(".c3_n3." in key or ".bu_conv1." in key for key in foot_keys)
+    images = torch.from_numpy(synthetic_parity_frames(64, count=2, width=288)).permute(0, 3, 1, 2).float()
+    with torch.no_grad():
+        maps, offsets, fine = necked.forward_with_foot(images)
+        cut_maps, cut_offsets, cut_fine = cut.forward_with_foot(images)
+        levels = cut.backbone(images)
+        _, f_out0, _, _ = cut.foot.features.neck.top_down(levels)
+        stride_16 = cut.foot.convs[1](cut.foot.features.stems[1](f_out0))
+    for before, after in zip(maps, cut_maps, strict=True):
+        torch.testing.assert_close(after, before)  # the detector is untouched
+    torch.testing.assert_close(cut_fine, fine)  # the refiner reads the same stride-8 features
+    torch.testing.assert_close(cut_offsets[0], offsets[0])  # and the stride-8 level the same offsets
+    torch.testing.assert_close(cut.foot.preds[1](stride_16), cut_offsets[1])  # stride 16: the top-down output
+    start = tmp_path / "start.pt"
+    config = dataclasses.replace(CONFIG, foot_refine=True, foot_neck=True)
+    save_checkpoint(start, Checkpoint(config, necked.state_dict(), ModelInfo("s", "toy", 0.4), {}))
+    out = tmp_path / "top-down"
+    data = toy_dataset(count=2, size=128, people=2)
+    assert main(["train", "--init-from", str(start), "--foot-neck-top-down", "--data", str(data),
+                 "--out", str(out), "--quiet", "--threads", "1", "--epochs", "1", "--batch-size", "2",
+                 "--distill", "0", "--freeze", *FROZEN]) == 0
+    trained = load_checkpoint(out / "last.pt")
+    assert trained.config == dataclasses.replace(config, foot_neck_top_down=True)
+    export = export_onnx(trained, tmp_path / "top-down.onnx")  # the parity check covers the foot
+    assert export.parity.frames > 0
+    with pytest.raises(ValueError, match="cuts the foot's own neck"):
+        dataclasses.replace(CONFIG, foot_neck_top_down=True)
+    with pytest.raises(ValueError, match="cuts the foot's own neck"):
+        footed.with_foot_neck_top_down()

@@ -22,11 +22,13 @@ DEMO = load_camera("models/demo_camera.yaml")
 LARGE = ViewPlanConfig(max_pixels=4_000_000)
 
 
-def test_default_budget_keeps_the_trained_strip() -> None:
+def test_default_budget_keeps_the_trained_strip_and_adds_the_nadir_view() -> None:
     plan = plan_view(DEMO)
     assert len(plan.bands) == 1 and plan.bands[0].scale == 1.0
     assert plan.canvas_wh == (1664 + 128, 416)
-    assert plan.cost_ratio == pytest.approx(1.0)
+    assert plan.nadir is not None and plan.nadir.side == 384 and plan.layout == "1band+nadir"
+    assert plan.pixels == 1792 * 416 + 384 * 384 <= ViewPlanConfig().max_pixels
+    assert plan.cost_ratio == pytest.approx(plan.pixels / (1792 * 416))
     assert any("budget" in note for note in plan.notes)
 
 
@@ -109,7 +111,7 @@ def test_config_refuses_nonsense(kwargs: dict[str, object]) -> None:
 # the nadir view
 
 def test_a_budget_with_room_adds_the_nadir_view_beside_the_canvas() -> None:
-    config = ViewPlanConfig(max_pixels=1_000_000)
+    config = ViewPlanConfig(max_pixels=1_000_000, nadir_scale=1.5)
     plan = plan_view(DEMO, config=config)
     nadir = plan.nadir
     assert nadir is not None and len(plan.bands) == 1
@@ -127,10 +129,10 @@ def test_a_budget_with_room_adds_the_nadir_view_beside_the_canvas() -> None:
     assert not any("nadir" in note for note in plan.notes)
 
 
-def test_the_default_budget_has_no_room_for_the_nadir_view_and_says_so() -> None:
-    plan = plan_view(DEMO)
+def test_a_budget_without_room_for_the_nadir_view_says_so() -> None:
+    plan = plan_view(DEMO, config=ViewPlanConfig(max_pixels=800_000))
     assert plan.nadir is None and plan.public()["nadir"] is None
-    assert any("no nadir view (448 x 448 px more)" in note for note in plan.notes)
+    assert any("no nadir view (384 x 384 px more)" in note for note in plan.notes)
     off = plan_view(DEMO, config=ViewPlanConfig(max_pixels=4_000_000, nadir_fraction=None))
     assert off.nadir is None and not any("nadir" in note for note in off.notes)
 
@@ -146,7 +148,7 @@ def test_with_the_nadir_view_the_strip_may_leave_it_the_disc() -> None:
     # Starting the strip 0.1 of the radius out saves rows (416 -> 384 for the demo camera), and
     # those saved rows can make room for the nadir view in a budget the whole strip and it overrun.
     circle = DEMO.image_circle_radius_px()
-    config = ViewPlanConfig(max_pixels=900_000, nadir_strip_from=0.1)
+    config = ViewPlanConfig(max_pixels=900_000, nadir_strip_from=0.1, nadir_scale=1.5)
     assert plan_view(DEMO, config=dataclasses.replace(config, nadir_strip_from=None)).nadir is None
     plan = plan_view(DEMO, config=config)
     assert plan.nadir is not None and plan.layout == "1band+nadir"

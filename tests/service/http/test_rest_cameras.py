@@ -108,16 +108,16 @@ def test_cameras_flag_seeds_the_registry(settings_for: Callable[..., Settings], 
 
 def test_a_planned_model_reports_each_camera_view(settings_for: Callable[..., Settings]) -> None:
     # The shipped model plans its views: within the default budget the demo camera keeps the
-    # trained strip; a larger budget gives its rim a band of its own, at 1.5x, and a nadir view.
+    # trained strip beside a nadir view; a larger budget gives its rim a band of its own, at 1.5x.
     with LiveServer(settings_for(model=DEFAULT_MODEL_PATH)) as live:
         view = httpx.get(f"{live.url}/v1/cameras/demo").json()["view"]
-        assert view["input_wh"] == [1792, 416] and view["cost_ratio"] == pytest.approx(1.0)
+        assert view["input_wh"] == [1792, 416] and view["nadir"]["input_wh"] == [384, 384]
+        assert view["cost_ratio"] == pytest.approx((1792 * 416 + 384 * 384) / (1792 * 416), abs=1e-3)
         assert [band["scale"] for band in view["bands"]] == [1.0]
         assert any("budget" in note for note in view["notes"])
-        assert view["nadir"] is None and any("no nadir view" in note for note in view["notes"])
-        # the one-band view runs at the model's own operating point
+        # the strip and nadir view run at the model's own operating point
         model = httpx.get(f"{live.url}/v1/model").json()
-        assert view["layout"] == "1band" and view["operating_point"] == {
+        assert view["layout"] == "1band+nadir" and view["operating_point"] == {
             "min_score": model["default_min_score"], "nms_iou": model["nms_iou"]}
         assert "view" not in httpx.get(f"{live.url}/v1/cameras").json()["cameras"][0]
         # A record read back is written back as it is: its view is the service's, not part of it.
@@ -128,8 +128,8 @@ def test_a_planned_model_reports_each_camera_view(settings_for: Callable[..., Se
         view = httpx.get(f"{live.url}/v1/cameras/demo").json()["view"]
         assert [band["scale"] for band in view["bands"]] == [1.0, 1.5]
         # the nadir view is a second input beside the canvas, counted in the same budget
-        assert view["nadir"]["input_wh"] == [448, 448]
-        assert view["pixels"] == view["input_wh"][0] * view["input_wh"][1] + 448 * 448 <= 4_000_000
+        assert view["nadir"]["input_wh"] == [384, 384]
+        assert view["pixels"] == view["input_wh"][0] * view["input_wh"][1] + 384 * 384 <= 4_000_000
         # ... at the operating point the model carries for that view (chosen on renders seen through it)
         points = httpx.get(f"{live.url}/v1/model").json()["view_operating_points"]
         assert view["layout"] == "2band+nadir" and view["operating_point"] == points["2band+nadir"]
