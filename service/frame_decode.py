@@ -6,8 +6,8 @@ model input is decoded at 1/2, 1/4 or 1/8 scale by libjpeg's DCT scaling, which 
 decoding work instead of decoding every pixel and then throwing most of them away.
 
 JPEGs are decoded by libjpeg-turbo's TurboJPEG API (simplejpeg), straight to RGB and with the GIL
-released: the same pixels as OpenCV's decoder bit for bit, in less time (a 2952 x 2952 frame at
-1/2 scale: 10.2 against 17.2 ms with OpenCV's decode and colour swap; README, "Benchmark"). A JPEG
+released: the same pixels as OpenCV's decoder bit for bit, in less time (2952 x 2952 renders at
+1/2 scale: 14.4 against 18.3 ms p50 with OpenCV's decode and colour swap; README, "Benchmark"). A JPEG
 it refuses (truncated, or a recoverable error it treats as fatal) goes to OpenCV's decoder, which
 answers as it always has.
 """

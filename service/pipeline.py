@@ -30,7 +30,7 @@ from contract import (
 from contract import select_detections as select_raw
 from contract.views import DEFAULT_VIEW, mapping_layout, view_plan, view_reference
 from fisheye import FisheyeCamera, cxcywh_to_corners, foot_points, radial_angles_rad
-from fisheye.view_plan import ViewPlan, ViewPlanConfig, ViewPlanError, may_have_nadir
+from fisheye.view_plan import ViewPlan, ViewPlanConfig, ViewPlanError, may_have_nadir, nadir_side
 from service.frame_decode import DecodedFrame, FrameError, check_frame_size, decode_frame, read_header
 from service.result import DetectionResult, Detections
 
@@ -99,12 +99,16 @@ class Pipeline:
     def warm_up(self, runs: int = 2) -> None:
         """Run the model on blank inputs so the first real frame does not pay for lazy set-up."""
         blank = self.model.blank_input()
-        # the nadir view's session too (made on first use), where the budget gives cameras the view
-        nadir = self.info.planned and may_have_nadir(view_reference(self.info), self.config.view)
+        # the nadir view's session too (made on first use), at its input's size, where the budget
+        # gives cameras the view
+        reference = view_reference(self.info) if self.info.planned else None
+        side = (nadir_side(reference, self.config.view)
+                if reference is not None and may_have_nadir(reference, self.config.view) else None)
+        nadir = None if side is None else np.full((side, side, 3), self.info.pad_value, dtype=np.uint8)
         for _ in range(runs):
             self.model.run(blank)
-            if nadir:
-                self.model.run_boxes(blank)
+            if nadir is not None:
+                self.model.run_boxes(nadir)
 
     def detect(self, data: bytes, camera: FisheyeCamera, *, min_score: float | None = None,
                frame_id: str | None = None) -> DetectionResult:

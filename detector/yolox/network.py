@@ -115,12 +115,13 @@ class YoloxNano(nn.Module):
         offsets: list[Tensor] = self.foot(stem_features)
         return maps, offsets, stem_features[0]
 
-    def _grown(self, new_weights: str | None, **changes: Any) -> YoloxNano:
+    def _grown(self, new_weights: str | None, dropped: tuple[str, ...] = (), **changes: Any) -> YoloxNano:
         """A copy built with `changes` to the config, every weight copied but the new ones (all
-        named `new_weights`...; None: no new one), which start as built; on this network's device,
-        in its mode."""
+        named `new_weights`...; None: no new one), which start as built, and those named `dropped`...,
+        which the copy no longer has; on this network's device, in its mode."""
         grown = YoloxNano(replace(self.config, **changes))
-        missing, unexpected = grown.load_state_dict(self.state_dict(), strict=False)
+        kept = {key: value for key, value in self.state_dict().items() if not key.startswith(dropped)}
+        missing, unexpected = grown.load_state_dict(kept, strict=False)
         if unexpected or any(new_weights is None or not key.startswith(new_weights) for key in missing):
             raise ValueError(f"{changes}: unexpected weights {unexpected}, missing {missing}")
         return grown.to(next(self.parameters()).device).train(self.training)
@@ -158,12 +159,9 @@ class YoloxNano(nn.Module):
         (so those levels answer differently until trained); every kept weight is copied."""
         if self.foot is None or self.foot.features is None:
             raise ValueError("a top-down foot neck cuts the foot's own neck (YoloxConfig.foot_neck)")
-        cut = YoloxNano(replace(self.config, foot_neck_top_down=True))
-        bottom_up = ("bu_conv2.", "c3_n3.", "bu_conv1.", "c3_n4.")
-        kept = {key: value for key, value in self.state_dict().items()
-                if not key.startswith(tuple(f"foot.features.neck.{name}" for name in bottom_up))}
-        cut.load_state_dict(kept, strict=True)
-        return cut.to(next(self.parameters()).device).train(self.training)
+        bottom_up = tuple(f"foot.features.neck.{name}." for name in ("bu_conv2", "c3_n3", "bu_conv1",
+                                                                     "c3_n4"))
+        return self._grown(None, dropped=bottom_up, foot_neck_top_down=True)
 
     def with_foot_refine_steps(self, steps: int) -> YoloxNano:
         """A copy whose foot refiner runs `steps` passes; every weight unchanged."""

@@ -4,6 +4,7 @@ through the service's pipeline with a test-double model."""
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -19,8 +20,9 @@ from contract import (
     metadata_props,
     parse_metadata,
 )
-from contract.views import DEFAULT_VIEW
+from contract.views import DEFAULT_VIEW, view_reference
 from fisheye import FisheyeCamera, camera_from_dict, foot_points
+from fisheye.view_plan import nadir_side
 from service.frame_decode import FrameError
 from service.pipeline import Pipeline, PipelineConfig
 
@@ -301,6 +303,17 @@ def test_warm_up_makes_the_nadir_session_only_where_the_budget_gives_the_view(tm
     path = save_polar_double(tmp_path / "planned.onnx", foot=True, planned=True)
     for nadir_fraction, made in ((None, False), (0.2, True)):
         model = OnnxModel(path, SessionThreads(1))
+        shapes: list[tuple[int, ...]] = []
+        run_boxes = model.run_boxes
+
+        def recording(image: np.ndarray, run_boxes: Callable[[np.ndarray], object] = run_boxes,
+                      shapes: list[tuple[int, ...]] = shapes) -> object:
+            shapes.append(image.shape)
+            return run_boxes(image)
+
+        model.run_boxes = recording  # type: ignore[method-assign]
         view = dataclasses.replace(DEFAULT_VIEW, nadir_fraction=nadir_fraction)
         Pipeline(model, PipelineConfig(view=view)).warm_up(runs=1)
         assert (model._boxes_session is not None) is made
+        side = nadir_side(view_reference(model.info), view)
+        assert shapes == ([(side, side, 3)] if made else [])  # warmed at the nadir view's own size
