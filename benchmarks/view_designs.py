@@ -48,6 +48,10 @@ DESIGNS: dict[str, ViewPlanConfig] = {
     **{f"strip from {start:g} + nadir view 0.35 at {scale:g}x": dataclasses.replace(
         DEFAULT_VIEW, scales=(1.0,), max_pixels=4_000_000, nadir_scale=scale, nadir_strip_from=start)
        for start, scale in ((0.1, 1.25), (0.1, 1.5), (0.2, 1.5))},
+    # after 0.7.1: where two bands do not fit, the rim band kept at 1.5x and narrowed to fit (with
+    # the nadir view) rather than one band; each at the two-band view's operating point
+    **{f"rim band narrowed to fit {budget / 1e6:g}M + nadir view": dataclasses.replace(
+        DEFAULT_VIEW, max_pixels=budget, min_outer_fraction=0.1) for budget in (1_400_000, 1_600_000)},
 }
 FIGURES = ("AP50", "precision", "recall", "AP_far", "recall_nadir", "mPE")
 

@@ -79,6 +79,33 @@ def test_a_budget_that_binds_shrinks_the_view_and_says_so() -> None:
     assert any("binds" in note for note in plan.notes)
 
 
+def test_narrowing_keeps_the_rim_band_at_its_scale_within_a_budget() -> None:
+    wide = plan_view(DEMO, config=LARGE)
+    budget = 1_400_000
+    narrowing = ViewPlanConfig(max_pixels=budget, min_outer_fraction=0.1)
+    plan = plan_view(DEMO, config=narrowing)
+    assert plan.layout == "2band+nadir" and plan.pixels <= budget
+    inner, outer = plan.bands
+    assert outer.scale == wide.bands[1].scale == 1.5
+    # the outer band starts further out than the unbound plan's, and reports the rim's people
+    assert outer.owned_px[0] > wide.bands[1].owned_px[0] and outer.radius_px == wide.bands[1].radius_px
+    assert inner.owned_px == (0.0, outer.owned_px[0]) and inner.radius_px > outer.owned_px[0]
+    assert outer.rows < wide.bands[1].rows
+    assert plan.smallest.along_px == pytest.approx(wide.smallest.along_px, rel=0.02)  # rows round to 16
+    assert any("reports from" in note for note in plan.notes)
+    # a wider budget lets the band reach further in; by default the band steps down to one
+    wider = plan_view(DEMO, config=dataclasses.replace(narrowing, max_pixels=1_600_000))
+    assert wider.bands[1].owned_px[0] < outer.owned_px[0]
+    default = plan_view(DEMO, config=ViewPlanConfig(max_pixels=budget))
+    assert default.layout == "1band+nadir"
+
+
+def test_a_rim_band_too_thin_to_report_anyone_is_not_kept() -> None:
+    plan = plan_view(DEMO, config=ViewPlanConfig(max_pixels=1_200_000, min_outer_fraction=0.1))
+    assert plan.layout == "1band+nadir" and plan.bands[0].scale == 1.0
+    assert any("at scale 1, not 1.5" in note for note in plan.notes)
+
+
 def test_wide_circle_reaches_the_frame_corners() -> None:
     # A 1696 x 1080 frame whose 180° circle is 1680 px across: cut at its top and bottom.
     camera = assumed_camera(1696, 1080).model_copy(update={"focal_px": (534.76, 534.76)})
@@ -102,7 +129,8 @@ def test_a_budget_below_any_view_is_refused() -> None:
 
 
 @pytest.mark.parametrize("kwargs", [{"scales": ()}, {"scales": (1.5, 1.0)}, {"max_pixels": 10},
-                                    {"target_along_px": 0.0}, {"person_height_m": 4.0}])
+                                    {"target_along_px": 0.0}, {"person_height_m": 4.0},
+                                    {"min_outer_fraction": 0.0}, {"min_outer_fraction": 1.0}])
 def test_config_refuses_nonsense(kwargs: dict[str, object]) -> None:
     with pytest.raises(ValueError):
         ViewPlanConfig(**kwargs)  # type: ignore[arg-type]
