@@ -358,6 +358,8 @@ def _narrowed(camera: FisheyeCamera, bands: list[ViewBand], top: float, rows_per
     are smallest, keeps the scale it needs. None where no split leaving the outer band at least
     `min_outer_fraction` of the view's radius fits."""
     inner, outer = bands
+    if config.min_outer_fraction is None:
+        return None
     reserve = (nadir_side(reference, config) or 0) ** 2
     last = top * (1 - config.min_outer_fraction)
     if outer.owned_px[0] >= last:
@@ -382,7 +384,7 @@ def _within_budget(camera: FisheyeCamera, bands: list[ViewBand], top: float, row
     notes: list[str] = []
     bands = _with_pieces(bands)
     layout = _layout(camera, bands, reference, config)
-    if _pixels(layout) > config.max_pixels and len(bands) == 2 and config.min_outer_fraction is not None:
+    if _pixels(layout) > config.max_pixels and len(bands) == 2:
         narrowed = _narrowed(camera, bands, top, rows_per_px, reference, config)
         if narrowed is not None:
             notes.append(f"budget {config.max_pixels} px binds: the outer band at scale {bands[1].scale:g} "
