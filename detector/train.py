@@ -211,9 +211,9 @@ def initial_network(args: argparse.Namespace, model_config: YoloxDetectorConfig
     if not isinstance(checkpoint.config, PolarDetectorConfig):
         raise ValueError(f"{args.init_from} is no polar YOLOX checkpoint; --init-from takes the COCO "
                          "ONNX or a polar YOLOX checkpoint")
-    if args.view == "fisheye" or args.strip is not None or args.inner_head or args.zoom != [1.0]:
-        raise ValueError(f"{args.init_from} fixes the view and strip; --view, --strip, --inner-head "
-                         "and --zoom are options of a start from the COCO ONNX")
+    if args.view == "fisheye" or args.strip is not None or args.inner_head:
+        raise ValueError(f"{args.init_from} fixes the view and strip; --view, --strip and --inner-head "
+                         "are options of a start from the COCO ONNX")
     network = checkpoint.build(args.init_from)
     if isinstance(network, NanoDetPlus):
         if _wants_foot(args):
