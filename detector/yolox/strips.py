@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -60,6 +61,11 @@ class StripAugment:
     # Zoom: the strip's top row at this multiple of the served radius (people look smaller above
     # 1, larger below); one is drawn per sample. Every scale caches its own strips.
     radius_scales: tuple[float, ...] = (1.0,)
+    # A planned view's band: the strip at this multiple of the served rows and columns per turn over
+    # the same radii (people this much larger, their shape kept), cut to a window of the served rows
+    # about a random person; one is drawn per sample. Not `radius_scales`, which keeps the columns:
+    # its people shrink along the ray alone.
+    band_scales: tuple[float, ...] = (1.0,)
     # > 0: train on windows of this many columns (a multiple of 32), centred near a random label:
     # the network is convolutional, and a window costs a fraction of the strip's forward pass.
     crop_width: int = 0
@@ -67,6 +73,8 @@ class StripAugment:
     def __post_init__(self) -> None:
         if not self.radius_scales or min(self.radius_scales) <= 0:
             raise ValueError(f"radius_scales must be positive, got {self.radius_scales}")
+        if not self.band_scales or min(self.band_scales) < 1:
+            raise ValueError(f"band_scales must be at least 1, got {self.band_scales}")
         if self.crop_width < 0 or self.crop_width % 32:
             raise ValueError(f"crop_width must be 0 or a positive multiple of 32, got {self.crop_width}")
 
@@ -132,28 +140,52 @@ def crop_window(image: NDArray[np.uint8], labels: FloatArray, feet: FloatArray, 
     return window, clipped[keep], kept_feet
 
 
+def crop_rows(image: NDArray[np.uint8], labels: FloatArray, feet: FloatArray, height: int,
+              rng: np.random.Generator) -> tuple[NDArray[np.uint8], FloatArray, FloatArray]:
+    """A window of `height` rows of a strip (H, W, 3) (starting at a multiple of 32), about a random
+    label when there is one, with the labels (N, 4) and feet (N, 3) that lie in it (kept as
+    `visible_labels` keeps them)."""
+    strip_h = image.shape[0]
+    if height >= strip_h:
+        return image, labels, feet
+    if len(labels):
+        pick = labels[int(rng.integers(len(labels)))]
+        centre = (pick[1] + pick[3]) / 2 + rng.uniform(-0.3, 0.3) * height
+    else:
+        centre = rng.uniform(0, strip_h)
+    y0 = int(np.clip(round((centre - height / 2) / 32) * 32, 0, strip_h - height))
+    shifted = labels - np.array([0.0, y0, 0.0, y0])
+    window = np.ascontiguousarray(image[y0:y0 + height])
+    clipped, keep = visible_labels(shifted, (image.shape[1], height))
+    kept_feet = feet[keep].copy()
+    kept_feet[:, 1] -= y0
+    return window, clipped[keep], kept_feet
+
+
 def place_labels(xyxy: FloatArray, width: int, strip_wh: tuple[int, int]) -> FloatArray:
     """The label copies of `label_copies`, alone."""
     return label_copies(xyxy, width, strip_wh)[0]
 
 
-def frame_strip(frame: FrameAnnotations, info: ModelInfo, radius_scale: float = 1.0
+def frame_strip(frame: FrameAnnotations, info: ModelInfo, radius_scale: float = 1.0, band_scale: float = 1.0
                 ) -> tuple[NDArray[np.uint8], FloatArray, FloatArray, int]:
     """A frame -> its full-turn strip (H, width, 3) RGB at start angle 0 (the served one, its radius
-    times `radius_scale`), its labels (N, 4) strip px (first-turn centres, full turns left out),
-    their feet (N, 3) (`detector.yolox.foot.strip_feet`: strip px and metres per px, NaN where
-    unknown) and how many full-turn labels were left out."""
+    times `radius_scale`, its rows and columns times `band_scale`), its labels (N, 4) strip px
+    (first-turn centres, full turns left out), their feet (N, 3) (`detector.yolox.foot.strip_feet`:
+    strip px and metres per px, NaN where unknown) and how many full-turn labels were left out."""
     if frame.camera is None or info.polar is None:
         raise ValueError(f"{frame.path}: polar strips need the frame's camera and a polar model")
     camera = frame.camera
     turn_info = dataclasses.replace(info, polar=dataclasses.replace(info.polar, overlap=0))
-    reduced = reduce_like_decode(load_rgb(frame), min_decoded_side(turn_info, camera))
-    if radius_scale == 1.0:
+    reduced = reduce_like_decode(load_rgb(frame), math.ceil(min_decoded_side(turn_info, camera) * band_scale))
+    if radius_scale == 1.0 and band_scale == 1.0:
         strip, _ = prepare_input(turn_info, reduced, camera)
         grid = polar_grid(turn_info, camera)
     else:
         grid = polar_grid(turn_info, camera)
-        grid = dataclasses.replace(grid, radius_px=grid.radius_px * radius_scale)
+        grid = dataclasses.replace(grid, radius_px=grid.radius_px * radius_scale,
+                                   height=round(grid.height * band_scale),
+                                   width=round(grid.width * band_scale))
         width, height = camera.image_size
         scale_xy = (reduced.shape[1] / width, reduced.shape[0] / height)
         strip = grid.unwrap(reduced, scale_xy, info.pad_value)
@@ -253,7 +285,7 @@ class PolarStripDataset:
         self.seed = seed
         self.cache = cache
         self.epoch = 0
-        self._strips: dict[tuple[int, float], tuple[NDArray[np.uint8], FloatArray, FloatArray]] = {}
+        self._strips: dict[tuple[int, float, float], tuple[NDArray[np.uint8], FloatArray, FloatArray]] = {}
         self.full_turns_left_out = 0
 
     def set_epoch(self, epoch: int) -> None:
@@ -266,13 +298,13 @@ class PolarStripDataset:
         """Counters for the epoch's log record."""
         return {"full_turn_labels_left_out": self.full_turns_left_out}
 
-    def base(self, index: int, radius_scale: float = 1.0
+    def base(self, index: int, radius_scale: float = 1.0, band_scale: float = 1.0
              ) -> tuple[NDArray[np.uint8], FloatArray, FloatArray]:
         """The frame's full-turn strip, labels and feet (strip px), cached when `cache`."""
-        key = (index, radius_scale)
+        key = (index, radius_scale, band_scale)
         if key in self._strips:
             return self._strips[key]
-        strip, xyxy, feet, full_turns = frame_strip(self.frames[index], self.info, radius_scale)
+        strip, xyxy, feet, full_turns = frame_strip(self.frames[index], self.info, radius_scale, band_scale)
         if full_turns:
             log.info("%s: %d people over the principal point left out", self.frames[index].path, full_turns)
         if self.cache:
@@ -284,11 +316,13 @@ class PolarStripDataset:
         rng = np.random.default_rng((self.seed, self.epoch, index))
         scales = self.augment.radius_scales
         scale = scales[int(rng.integers(len(scales)))] if len(scales) > 1 else scales[0]
-        strip, first_turn, feet = self.base(index, scale)
-        width = self.config.polar_width
+        bands = self.augment.band_scales
+        band = bands[int(rng.integers(len(bands)))] if len(bands) > 1 else bands[0]
+        strip, first_turn, feet = self.base(index, scale, band)
+        width = strip.shape[1]  # the served turn, or a band's at its scale
         shift = int(rng.integers(width)) if self.augment.roll else 0
         image, xyxy = roll_strip(strip, first_turn, shift, self.config.polar_overlap)
-        labels, source, moved = label_copies(xyxy, width, self.config.strip_wh)
+        labels, source, moved = label_copies(xyxy, width, (image.shape[1], image.shape[0]))
         feet = feet[source].copy()
         feet[:, 0] += (xyxy[:, 0] - first_turn[:, 0])[source] + moved  # each foot moves with its box
         if rng.random() < self.augment.flip:
@@ -299,6 +333,7 @@ class PolarStripDataset:
             feet[:, 0] = right - feet[:, 0]
         if self.augment.crop_width:
             image, labels, feet = crop_window(image, labels, feet, self.augment.crop_width, rng)
+        image, labels, feet = crop_rows(image, labels, feet, self.config.input_size, rng)  # a band's rows
         image = photometric(image, self.augment, rng)
         edge = np.array([EDGE_TO_CENTRE_PX, EDGE_TO_CENTRE_PX, 0.0])
         return StripSample(image, labels + EDGE_TO_CENTRE_PX, feet + edge)

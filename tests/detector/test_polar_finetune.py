@@ -116,6 +116,29 @@ def test_samples_are_reproducible_and_flipped_labels_stay_in_the_strip(
     assert images.shape == (2, 3, 64, 288) and len(targets) == 2
 
 
+def test_a_band_scale_strip_is_the_band_of_a_planned_view(toy_dataset: Callable[..., Path]) -> None:
+    frame = read_dataset(toy_dataset(count=1, size=128, people=4))[0]
+    info = training_info(CONFIG)
+    _, xyxy, feet, _ = frame_strip(frame, info)
+    band, band_xyxy, band_feet, _ = frame_strip(frame, info, band_scale=1.5)
+    # 1.5x the rows and columns over the same radii: people 1.5x larger in both directions
+    assert band.shape == (96, 384, 3)
+    sizes, band_sizes = xyxy[:, 2:] - xyxy[:, :2], band_xyxy[:, 2:] - band_xyxy[:, :2]
+    np.testing.assert_allclose(band_sizes, 1.5 * sizes, rtol=0.05)
+    np.testing.assert_allclose(band_feet[:, :2] + 0.5, 1.5 * (feet[:, :2] + 0.5), rtol=0.05, atol=0.5)
+    np.testing.assert_allclose(band_feet[:, 2], feet[:, 2] / 1.5, rtol=0.05)  # metres per strip px
+    # samples keep the served rows (a window about a person) so that batches stack
+    dataset = PolarStripDataset([frame], CONFIG, StripAugment(band_scales=(1.5,), flip=0.0), seed=1)
+    dataset.set_epoch(0)
+    sample = dataset[0]
+    assert sample.image.shape == (64, 384 + 32, 3)
+    labels = sample.labels_xyxy - EDGE_TO_CENTRE_PX
+    assert len(labels) >= 1 and np.all(labels[:, 1] >= -0.5) and np.all(labels[:, 3] <= 63.5)
+    assert len(sample.feet) == len(labels)
+    with pytest.raises(ValueError, match="band_scales"):
+        StripAugment(band_scales=(0.5,))
+
+
 # ----- loss
 
 
