@@ -377,10 +377,9 @@ def _within_budget(camera: FisheyeCamera, bands: list[ViewBand], top: float, row
                    reference: ViewReference, config: ViewPlanConfig
                    ) -> tuple[list[ViewBand], Layout, list[str]]:
     """The bands (cut into pieces) and their layout within `config.max_pixels`: the outer band
-    starts further out at its scale first (`_narrowed`), else steps down the scales (to one band at
-    the smallest), then the one band shrinks; notes say
-    where the budget bound. ViewPlanError when under a quarter of the trained scale or 64 rows
-    would be left."""
+    starts further out at its scale where the config asks for it (`_narrowed`), else steps down the
+    scales (to one band at the smallest), then the one band shrinks; notes say where the budget
+    bound. ViewPlanError when under a quarter of the trained scale or 64 rows would be left."""
     notes: list[str] = []
     bands = _with_pieces(bands)
     layout = _layout(camera, bands, reference, config)
