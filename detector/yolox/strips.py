@@ -132,12 +132,7 @@ def crop_window(image: NDArray[np.uint8], labels: FloatArray, feet: FloatArray, 
     else:
         centre = rng.uniform(0, strip_w)
     x0 = int(np.clip(round(centre - width / 2), 0, strip_w - width))
-    shifted = labels - np.array([x0, 0.0, x0, 0.0])
-    window = np.ascontiguousarray(image[:, x0:x0 + width])
-    clipped, keep = visible_labels(shifted, (width, image.shape[0]))
-    kept_feet = feet[keep].copy()
-    kept_feet[:, 0] -= x0
-    return window, clipped[keep], kept_feet
+    return _window(image, labels, feet, x0, width, axis=0)
 
 
 def crop_rows(image: NDArray[np.uint8], labels: FloatArray, feet: FloatArray, height: int,
@@ -154,11 +149,19 @@ def crop_rows(image: NDArray[np.uint8], labels: FloatArray, feet: FloatArray, he
     else:
         centre = rng.uniform(0, strip_h)
     y0 = int(np.clip(round((centre - height / 2) / 32) * 32, 0, strip_h - height))
-    shifted = labels - np.array([0.0, y0, 0.0, y0])
-    window = np.ascontiguousarray(image[y0:y0 + height])
-    clipped, keep = visible_labels(shifted, (image.shape[1], height))
+    return _window(image, labels, feet, y0, height, axis=1)
+
+
+def _window(image: NDArray[np.uint8], labels: FloatArray, feet: FloatArray, start: int, size: int,
+            axis: int) -> tuple[NDArray[np.uint8], FloatArray, FloatArray]:
+    """`size` columns (`axis` 0, x) or rows (1, y) of a strip from `start` on, with the labels and
+    feet that lie in them, moved into the window."""
+    shift = np.zeros(2)
+    shift[axis] = start
+    window = np.ascontiguousarray(image[:, start:start + size] if axis == 0 else image[start:start + size])
+    clipped, keep = visible_labels(labels - np.tile(shift, 2), (window.shape[1], window.shape[0]))
     kept_feet = feet[keep].copy()
-    kept_feet[:, 1] -= y0
+    kept_feet[:, axis] -= start
     return window, clipped[keep], kept_feet
 
 
