@@ -112,6 +112,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="train on strip windows of this many columns (a multiple of 32) around "
                             "the people, a fraction of the strip's cost per sample (default: whole strips)")
     polar.add_argument("--distill", type=float, default=None, help="λ of the COCO distillation (default 1.0)")
+    polar.add_argument("--teacher", default=None, metavar="PATH.onnx|PATH.pt",
+                       help="distil from this network (a COCO ONNX or a polar checkpoint of the same "
+                            "network) instead of the one --init-from starts from, e.g. the COCO "
+                            "YOLOX-Nano for a head that goes on from a fine-tuned checkpoint")
     polar.add_argument("--checkpoint-every", type=float, default=None,
                        help="seconds between checkpoints to OUT/last.pt (default 180)")
 
@@ -244,6 +248,37 @@ def initial_network(args: argparse.Namespace, model_config: YoloxDetectorConfig
     return model_config, network
 
 
+def teacher_network(path: str, model_config: YoloxDetectorConfig, student: YoloxNano | NanoDetPlus
+                    ) -> YoloxNano | NanoDetPlus:
+    """`--teacher`: the network of a COCO ONNX (read as `--init-from` reads it, without the foot
+    branch or inner head, which the distillation does not read) or of a polar checkpoint. ValueError
+    naming the file when it is not the student's network or its maps differ in shape."""
+    if Path(path).suffix.lower() != ".pt":
+        if not isinstance(model_config, PolarDetectorConfig):
+            raise ValueError("--teacher is an option of the polar view")
+        plain = replace(model_config, foot=False, foot_refine=False, foot_neck=False,
+                        foot_neck_top_down=False, inner_fraction=0.0)
+        teacher = init_network_from_pretrained(path, plain)
+    else:
+        checkpoint = load_checkpoint(path)
+        if not isinstance(checkpoint.config, PolarDetectorConfig):
+            raise ValueError(f"--teacher {path} is no polar YOLOX or NanoDet checkpoint")
+        built = checkpoint.build(path)
+        if not isinstance(built, YoloxNano | NanoDetPlus):
+            raise ValueError(f"--teacher {path} holds a {type(built).__name__}, no YOLOX or NanoDet")
+        teacher = built
+    if isinstance(teacher, NanoDetPlus) != isinstance(student, NanoDetPlus):
+        raise ValueError(f"--teacher {path} holds a {type(teacher).__name__}, the student is a "
+                         f"{type(student).__name__}")
+    probe = torch.zeros(1, 3, 64, 128)
+    with torch.no_grad():
+        theirs, mine = teacher.eval()(probe), student.eval()(probe)
+    if [tuple(t.shape) for t in theirs] != [tuple(m.shape) for m in mine]:
+        raise ValueError(f"--teacher {path}: its maps {[tuple(t.shape) for t in theirs]} differ from the "
+                         f"student's {[tuple(m.shape) for m in mine]}")
+    return teacher
+
+
 def run_polar(args: argparse.Namespace) -> int:
     """`--init-from`: fine-tune the YOLOX of `--view` (polar by default). Every input is checked
     before OUT is touched."""
@@ -260,11 +295,13 @@ def run_polar(args: argparse.Namespace) -> int:
             seed=args.seed, val_limit=args.val_limit, device=args.device,
             augment=augment)
         model_config, initial = initial_network(args, model_config)
+        teacher = None if args.teacher is None else teacher_network(args.teacher, model_config, initial)
         train_frames = [frame for path in args.data for frame in read_dataset(path)]
         val_frames = read_dataset(args.val) if args.val else None
         names = ", ".join(Path(path).parent.name or str(path) for path in args.data)
         finetuner = Finetuner(model_config, config, out, initial, train_frames, val_frames,
-                              f"{names} ({len(train_frames)} frames)", progress=not args.quiet)
+                              f"{names} ({len(train_frames)} frames)", progress=not args.quiet,
+                              teacher=teacher)
         if args.resume:
             if not (out / LAST).exists():
                 raise ValueError(f"nothing to resume, {out / LAST} does not exist")
@@ -277,6 +314,7 @@ def run_polar(args: argparse.Namespace) -> int:
         (out / "log.jsonl").unlink(missing_ok=True)
         (out / "config.json").write_text(json.dumps(
             {"model": model_config.to_dict(), "finetune": asdict(config), "init_from": args.init_from,
-             "data": args.data, "val": args.val}, indent=2, default=str) + "\n", encoding="utf-8")
+             "teacher": args.teacher, "data": args.data, "val": args.val}, indent=2, default=str) + "\n",
+            encoding="utf-8")
     finetuner.fit()
     return 0

@@ -4,7 +4,11 @@
 
 The student starts as the COCO person network (`init_from_pretrained`); a frozen copy of it, the
 teacher, scores every strip too, and the loss's `distill` term keeps the student's scores where no
-label says otherwise (`detector.yolox.loss`). The first backbone stages stay frozen (`freeze`).
+label says otherwise (`detector.yolox.loss`). A run that goes on from a fine-tuned checkpoint may
+name another teacher (`teacher`: e.g. the COCO network itself, so that what the checkpoint's head
+already traded away is held to COCO and not to the checkpoint). The first backbone stages stay
+frozen (`freeze`; `foot` freezes the foot branch, so a head trained on its own leaves the feet as
+they were).
 
 Checkpoints go to `OUT/last.pt` every `checkpoint_every_s` seconds and at each epoch's end, with
 weights, teacher, optimizer, schedule, RNG states, the epoch and the batch within it; the epoch's
@@ -61,7 +65,8 @@ LAST = "last.pt"
 BEST = "best.pt"
 TRAINER_KINDS = {POLAR_ARCH: "polar-finetune", FISHEYE_ARCH: "fisheye-finetune"}
 VIEWS = {POLAR_ARCH: "polar", FISHEYE_ARCH: "fisheye"}  # `fishloc train --view`
-STAGES = ("stem", "dark2", "dark3", "dark4", "dark5", "neck", "head", "inner_head")
+STAGES = ("stem", "dark2", "dark3", "dark4", "dark5", "neck", "head", "inner_head", "foot")
+OPTIONAL_STAGES = ("inner_head", "foot")  # frozen where the network has them, ignored where not
 NANODET_STAGES = ("backbone", "neck", "head")  # what --freeze names of a NanoDet-Plus
 
 
@@ -119,7 +124,10 @@ def training_set(model_config: YoloxDetectorConfig, frames: list[FrameAnnotation
 
 def stage_parameters(model: YoloxNano | NanoDetPlus, stage: str) -> list[nn.Parameter]:
     """The parameters of one of `model`'s stages (STAGES of YOLOX, NANODET_STAGES of NanoDet);
-    ValueError for a stage the network does not have."""
+    none for an optional stage (OPTIONAL_STAGES) it lacks; ValueError for any other stage the
+    network does not have."""
+    if stage in OPTIONAL_STAGES and getattr(model, stage, None) is None:
+        return []
     stages = NANODET_STAGES if isinstance(model, NanoDetPlus) else STAGES
     if stage not in stages:
         raise ValueError(f"freeze: {type(model).__name__} has no stage {stage!r}; "
@@ -136,7 +144,7 @@ class Finetuner:
     def __init__(self, model_config: YoloxDetectorConfig, config: FinetuneConfig, out: Path,
                  initial: YoloxNano | NanoDetPlus, train_frames: list[FrameAnnotations],
                  val_frames: list[FrameAnnotations] | None = None, trained_on: str = "",
-                 progress: bool = True) -> None:
+                 progress: bool = True, teacher: YoloxNano | NanoDetPlus | None = None) -> None:
         self.model_config = model_config
         self.config = config
         self.out = out
@@ -149,9 +157,9 @@ class Finetuner:
         self.model = model
         self.model.load_state_dict(initial.state_dict(), strict=True)
         self.model.to(self.device)
-        self.teacher = copy.deepcopy(self.model).eval().requires_grad_(False)
-        frozen = {id(p) for stage in config.freeze if stage != "inner_head" or hasattr(self.model, stage)
-                  for p in stage_parameters(self.model, stage)}
+        start = self.model if teacher is None else teacher
+        self.teacher = copy.deepcopy(start).to(self.device).eval().requires_grad_(False)
+        frozen = {id(p) for stage in config.freeze for p in stage_parameters(self.model, stage)}
         for parameter in self.model.parameters():
             parameter.requires_grad_(id(parameter) not in frozen)
         trainable = [p for p in self.model.parameters() if p.requires_grad]
@@ -219,8 +227,12 @@ class Finetuner:
                                   f"for {mine.to_dict()}; resume with the same {flag}")
         if state.get("kind") != self.kind:
             raise CheckpointError(f"{path} holds no fine-tuning state to resume from")
+        teacher = state["teacher"]
+        if set(teacher) != set(self.teacher.state_dict()):
+            raise CheckpointError(f"{path} was distilled from another teacher network than this run's; "
+                                  "resume it with the same --teacher")
         self.model.load_state_dict(checkpoint.build(path).state_dict())
-        self.teacher.load_state_dict(state["teacher"])
+        self.teacher.load_state_dict(teacher)
         self.optimizer.load_state_dict(state["optimizer"])
         self.scheduler.load_state_dict(state["scheduler"])
         self.epoch, self.batch, self.step = int(state["epoch"]), int(state["batch"]), int(state["step"])

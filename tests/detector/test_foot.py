@@ -397,3 +397,40 @@ def test_a_top_down_foot_neck_keeps_the_stride_8_features_and_drops_the_bottom_u
         dataclasses.replace(CONFIG, foot_neck_top_down=True)
     with pytest.raises(ValueError, match="cuts the foot's own neck"):
         footed.with_foot_neck_top_down()
+
+
+def test_a_head_trained_on_from_a_checkpoint_is_held_to_another_teacher(
+        footed: YoloxNano, toy_dataset: Callable[..., Path], tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """`--teacher`: the COCO network distils a head that goes on from a fine-tuned checkpoint, and
+    `--freeze ... foot` leaves the feet as they were."""
+    network = copy.deepcopy(footed)
+    with torch.no_grad():  # a head that has moved away from COCO's, as a fine-tuned one has
+        for name, parameter in network.named_parameters():
+            if name.startswith("head."):
+                parameter.add_(0.05 * torch.randn_like(parameter))
+    start = tmp_path / "start.pt"
+    save_checkpoint(start, Checkpoint(CONFIG, network.state_dict(), ModelInfo("s", "toy", 0.4), {}))
+    data = toy_dataset(count=2, size=128, people=2)
+    out = tmp_path / "head"
+    args = ["train", "--init-from", str(start), "--data", str(data), "--out", str(out), "--quiet",
+            "--threads", "1", "--epochs", "1", "--batch-size", "2", "--distill", "4", "--lr", "0.01",
+            "--freeze", "stem", "dark2", "dark3", "dark4", "dark5", "neck", "foot"]
+    assert main([*args, "--teacher", str(ONNX_PATH)]) == 0
+    trained = load_checkpoint(out / "last.pt")
+    moved = {k for k, v in network.state_dict().items() if not torch.equal(trained.model_state[k], v)}
+    assert moved and all(k.startswith("head.") for k in moved)  # the foot branch frozen with the rest
+    coco = init_from_pretrained(str(ONNX_PATH), dataclasses.replace(CONFIG, foot=False)).state_dict()
+    teacher = trained.training_state["teacher"]
+    assert set(teacher) == set(coco) and all(torch.equal(teacher[k], v) for k, v in coco.items())
+    # resuming it without the teacher it was distilled from is refused, naming the checkpoint
+    assert main([*args, "--resume"]) == 2
+    assert f"{out / 'last.pt'} was distilled from another teacher" in capsys.readouterr().err
+    # without --teacher the start itself teaches, as before
+    assert main([*args[:6], str(tmp_path / "self"), *args[7:]]) == 0
+    own = load_checkpoint(tmp_path / "self" / "last.pt").training_state["teacher"]
+    assert torch.equal(own["head.cls_preds.0.weight"], network.state_dict()["head.cls_preds.0.weight"])
+    # a teacher that cannot be read is refused before anything is written
+    missing = tmp_path / "missing.onnx"
+    assert main([*args[:6], str(tmp_path / "bad"), *args[7:], "--teacher", str(missing)]) == 2
+    assert str(missing) in capsys.readouterr().err and not (tmp_path / "bad").exists()
