@@ -57,6 +57,7 @@ from detector.operating_point import (
     describe,
     sweep,
 )
+from detector.people import person_outcomes, summarise_outcomes, write_outcomes_csv
 from detector.plots import plot_pe_by_distance, plot_pr_curve
 from fisheye import FisheyeCamera, assumed_camera
 from fisheye.boxes import cepdof_to_corners
@@ -256,6 +257,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="camera of frames without a calibration (CEPDOF/WEPDTOF files): the 180° "
                              "circle that fills the frame's shorter side (default, DESIGN.md), or the "
                              "one fitted to each frame's image circle (for circles wider than the frame)")
+    parser.add_argument("--people", default=None, metavar="CSV",
+                        help="write each annotated person's outcome here (found, low_score, loose_box, "
+                             "missed; where they stand, the best detection's IoU, score and box) and "
+                             "their counts by ring and frame into the JSON's 'people'")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -282,6 +287,11 @@ def run(args: argparse.Namespace) -> int:
         evaluation = evaluate(predictor, frames, progress=True, min_score=args.min_score)
         ious = sorted({point.nms_iou for point in predictor.points_used})
         extra["nms_iou"] = ious[0] if len(ious) == 1 else ious
+    if args.people:
+        outcomes = person_outcomes(evaluation.frames, [str(f.image_id) for f in frames])
+        write_outcomes_csv(outcomes, args.people)
+        extra["people"] = summarise_outcomes(outcomes)
+        print(json.dumps({"people": extra["people"]["all"]}))
     metrics = json_safe({**evaluation.metrics, **extra, "model": str(args.model), "data": str(args.data),
                          "assumed_camera": args.assumed_camera})
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)

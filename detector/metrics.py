@@ -144,7 +144,7 @@ def average_precision(scores: FloatArray, true_positive: NDArray[np.bool_], num_
     return float(sampled.mean())
 
 
-def _prepare(frame: EvalFrame, file_boxes: bool = True) -> FrameMatch:
+def prepare_match(frame: EvalFrame, file_boxes: bool = True) -> FrameMatch:
     """Match data of a frame against its file boxes when it has them and `file_boxes` is set,
     else against its radius-aligned boxes."""
     order = np.argsort(-frame.det_scores, kind="stable")[:MAX_DETECTIONS]
@@ -246,7 +246,7 @@ def _mean(values: FloatArray) -> float:
     return float(values.mean()) if len(values) else float("nan")
 
 
-def _threshold(frame: EvalFrame, min_score: float | None) -> float:
+def frame_threshold(frame: EvalFrame, min_score: float | None) -> float:
     """`min_score`, or where it is None the frame's own operating threshold."""
     if min_score is not None:
         return min_score
@@ -261,7 +261,8 @@ def precision_recall_at(frames: Sequence[EvalFrame], prepared: Sequence[FrameMat
     true_pos = n_det = n_gt = 0
     for frame, match in zip(frames, prepared, strict=True):
         matched = greedy_match(match.iou, 0.5)
-        above = (frame.det_scores[match.order] >= _threshold(frame, min_score)) & ~match.ignored(matched, 0.5)
+        threshold = frame_threshold(frame, min_score)
+        above = (frame.det_scores[match.order] >= threshold) & ~match.ignored(matched, 0.5)
         true_pos += int((matched[above] >= 0).sum())
         n_det += int(above.sum())
         n_gt += len(frame.gt_boxes)
@@ -282,7 +283,7 @@ def nadir_recall(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch], mi
         offset = frame.gt_boxes[:, :2] - np.asarray(frame.camera.principal_point)
         below = np.hypot(offset[:, 0], offset[:, 1]) < NADIR_FRACTION * frame.camera.image_circle_radius_px()
         matched = greedy_match(match.iou, 0.5)
-        above = frame.det_scores[match.order] >= _threshold(frame, min_score)
+        above = frame.det_scores[match.order] >= frame_threshold(frame, min_score)
         hit = np.zeros(len(frame.gt_boxes), dtype=bool)
         hit[matched[above & (matched >= 0)]] = True
         found += int((hit & below).sum())
@@ -294,7 +295,7 @@ def pr_curve(frames: Sequence[EvalFrame]) -> tuple[FloatArray, FloatArray, Float
     """Precision, recall and score thresholds (each (D,)) at IoU 0.5 over all detections."""
     scores, positives, num_gt = [], [], 0
     for frame in frames:
-        match = _prepare(frame)
+        match = prepare_match(frame)
         matched = greedy_match(match.iou, 0.5)
         keep = ~match.ignored(matched, 0.5)
         scores.append(frame.det_scores[match.order][keep])
@@ -312,7 +313,7 @@ def pr_curve(frames: Sequence[EvalFrame]) -> tuple[FloatArray, FloatArray, Float
 def compute_metrics(frames: Sequence[EvalFrame], min_score: float | None) -> dict[str, float]:
     """Every metric of the module docstring for one set of frames (NaN where undefined); precision
     and recall at `min_score`, or where it is None at each frame's own threshold (`min_score`)."""
-    prepared = [_prepare(frame) for frame in frames]
+    prepared = [prepare_match(frame) for frame in frames]
     result: dict[str, float] = _ap_summary(frames, prepared)
     for name, distance_range in DISTANCE_BINS_M.items():
         result[f"AP_{name}"] = _ap_at(frames, prepared, 0.5, distance_range)
@@ -328,7 +329,7 @@ def compute_metrics(frames: Sequence[EvalFrame], min_score: float | None) -> dic
     result["num_frames"] = float(len(frames))
     result["num_gt"] = float(sum(len(f.gt_boxes) for f in frames))
     if any(frame.gt_corners is not None for frame in frames):
-        aligned = [_prepare(frame, file_boxes=False) for frame in frames]
+        aligned = [prepare_match(frame, file_boxes=False) for frame in frames]
         for key, value in _ap_summary(frames, aligned).items():
             result[f"{key}{RADIUS_ALIGNED}"] = value
         precision, recall = precision_recall_at(frames, aligned, min_score)
@@ -339,4 +340,4 @@ def compute_metrics(frames: Sequence[EvalFrame], min_score: float | None) -> dic
 def localisation_points(frames: Sequence[EvalFrame]) -> tuple[FloatArray, dict[str, FloatArray]]:
     """GT distance (M,) of every IoU-0.5 match with a floor point, and its error (M,) m by each
     placement (FOOT, BOX_SIDE, CENTRE)."""
-    return _localisation(frames, [_prepare(frame) for frame in frames])
+    return _localisation(frames, [prepare_match(frame) for frame in frames])
