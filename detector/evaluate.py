@@ -57,7 +57,14 @@ from detector.operating_point import (
     describe,
     sweep,
 )
-from detector.people import person_outcomes, summarise_outcomes, write_outcomes_csv
+from detector.people import (
+    FalsePositive,
+    PersonOutcome,
+    false_positives,
+    person_outcomes,
+    summarise_outcomes,
+    write_rows_csv,
+)
 from detector.plots import plot_pe_by_distance, plot_pr_curve
 from fisheye import FisheyeCamera, assumed_camera
 from fisheye.boxes import cepdof_to_corners
@@ -259,8 +266,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "one fitted to each frame's image circle (for circles wider than the frame)")
     parser.add_argument("--people", default=None, metavar="CSV",
                         help="write each annotated person's outcome here (found, low_score, loose_box, "
-                             "missed; where they stand, the best detection's IoU, score and box) and "
-                             "their counts by ring and frame into the JSON's 'people'")
+                             "missed; where they stand, the best detection's IoU, score and box), and "
+                             "the counts by ring and frame into the JSON's 'people'")
+    parser.add_argument("--false-positives", default=None, metavar="CSV",
+                        help="write each false positive at the threshold here (duplicate, loose, "
+                             "background; where, score, box, best IoU), and the counts into 'people'")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -287,10 +297,15 @@ def run(args: argparse.Namespace) -> int:
         evaluation = evaluate(predictor, frames, progress=True, min_score=args.min_score)
         ious = sorted({point.nms_iou for point in predictor.points_used})
         extra["nms_iou"] = ious[0] if len(ious) == 1 else ious
-    if args.people:
-        outcomes = person_outcomes(evaluation.frames, [str(f.image_id) for f in frames])
-        write_outcomes_csv(outcomes, args.people)
-        extra["people"] = summarise_outcomes(outcomes)
+    if args.people or args.false_positives:
+        names = [str(f.image_id) for f in frames]
+        outcomes = person_outcomes(evaluation.frames, names)
+        errors = false_positives(evaluation.frames, names)
+        if args.people:
+            write_rows_csv(outcomes, args.people, PersonOutcome)
+        if args.false_positives:
+            write_rows_csv(errors, args.false_positives, FalsePositive)
+        extra["people"] = summarise_outcomes(outcomes, errors)
         print(json.dumps({"people": extra["people"]["all"]}))
     metrics = json_safe({**evaluation.metrics, **extra, "model": str(args.model), "data": str(args.data),
                          "assumed_camera": args.assumed_camera})

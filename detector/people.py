@@ -1,10 +1,12 @@
-"""Each annotated person's outcome in an evaluation: found, found below the threshold, boxed loosely,
-or missed, with where they stand and what the best-overlapping detection looked like.
+"""Each annotated person's outcome in an evaluation (found, found below the threshold, boxed loosely,
+or missed) and each false positive's kind (a duplicate, a loose box, background), with where they
+are and what the best-overlapping box looked like.
 
-AP says how many people a model finds; this says which ones it does not and why, so a design can be
-aimed at them (the rim's small people, seated people boxed as if they stood, crowds). Matching is
-the metrics' own (`detector.metrics`): file boxes where the frame has them, greedy at IoU 0.5 by
-score, among the same top detections AP counts.
+AP says how many people a model finds; this says which ones it does not and why, and what its
+false positives are, so a design can be aimed at them (the rim's small people, seated people boxed
+as if they stood, crowds), as TIDE breaks COCO's errors down. Matching is the metrics' own
+(`detector.metrics`): file boxes where the frame has them, greedy at IoU 0.5 by score, among the
+same top detections AP counts; detections on crowd boxes count neither way.
 """
 
 from __future__ import annotations
@@ -24,6 +26,11 @@ LOW_SCORE = "low_score"  # a detection below the threshold overlaps them at IoU 
 LOOSE_BOX = "loose_box"  # the best detection overlaps them at IoU 0.3–0.5: found, boxed badly
 MISSED = "missed"  # no detection overlaps them at IoU 0.3
 OUTCOMES = (FOUND, LOW_SCORE, LOOSE_BOX, MISSED)
+# a false positive (at or above the threshold, matched to nobody at IoU 0.5) that overlaps ...
+DUPLICATE = "duplicate"  # ... at IoU ≥ 0.5 a person a higher-scoring detection took
+LOOSE = "loose"  # ... a person at IoU 0.3–0.5 (a badly fitted box; the person may be a loose_box)
+BACKGROUND = "background"  # ... nobody at IoU 0.3
+FALSE_POSITIVES = (DUPLICATE, LOOSE, BACKGROUND)
 LOOSE_IOU = 0.3
 # rings of the image circle's radius the summary counts by: below the lens, the middle, the rim
 RINGS = {"nadir": (0.0, NADIR_FRACTION), "middle": (NADIR_FRACTION, 0.7), "rim": (0.7, np.inf)}
@@ -52,6 +59,59 @@ class PersonOutcome:
     det_across_px: float
 
 
+@dataclass(frozen=True)
+class FalsePositive:
+    """One detection at or above the threshold that matches nobody: `frame`, its `rank` by score in
+    the frame, `kind` (one of FALSE_POSITIVES), `score`, the box centre's radius in px and as a
+    fraction of the image circle's, its box `along_px` × `across_px`, and its highest IoU with any
+    person (`best_iou`)."""
+
+    frame: str
+    rank: int
+    kind: str
+    score: float
+    radius_px: float
+    radius_fraction: float
+    along_px: float
+    across_px: float
+    best_iou: float
+
+
+def _radii(frame: EvalFrame, boxes: np.ndarray) -> tuple[np.ndarray, float]:
+    """(N,) px from the principal point of `boxes`' centres, and the image circle's radius (NaN
+    without a camera)."""
+    offset = boxes[:, :2] - np.asarray(frame.principal_point, dtype=np.float64)
+    circle_px = frame.camera.image_circle_radius_px() if frame.camera is not None else np.nan
+    return np.hypot(offset[:, 0], offset[:, 1]), circle_px
+
+
+def frame_false_positives(frame: EvalFrame, name: str, min_score: float | None = None) -> list[FalsePositive]:
+    """Each false positive of `frame` at `min_score` (None: the frame's own threshold)."""
+    match = prepare_match(frame)
+    matched = greedy_match(match.iou, 0.5)
+    scores = frame.det_scores[match.order]
+    false = (scores >= frame_threshold(frame, min_score)) & (matched < 0) & ~match.ignored(matched, 0.5)
+    taken = np.zeros(len(frame.gt_boxes), dtype=bool)
+    taken[matched[matched >= 0]] = True
+    boxes = frame.det_boxes[match.order]
+    radius_px, circle_px = _radii(frame, boxes)
+    rows = []
+    for d in np.flatnonzero(false):
+        ious = match.iou[d]
+        best_iou = float(ious.max()) if len(ious) else 0.0
+        if best_iou >= 0.5:  # unmatched at 0.5, so every person it overlaps so was taken before it
+            kind = DUPLICATE
+        elif best_iou >= LOOSE_IOU:
+            kind = LOOSE
+        else:
+            kind = BACKGROUND
+        rows.append(FalsePositive(
+            frame=name, rank=int(d), kind=kind, score=float(scores[d]), radius_px=float(radius_px[d]),
+            radius_fraction=float(radius_px[d] / circle_px), along_px=float(boxes[d, 3]),
+            across_px=float(boxes[d, 2]), best_iou=best_iou))
+    return rows
+
+
 def frame_outcomes(frame: EvalFrame, name: str, min_score: float | None = None) -> list[PersonOutcome]:
     """The outcome of each person of `frame` at `min_score` (None: the frame's own threshold)."""
     match = prepare_match(frame)
@@ -60,9 +120,7 @@ def frame_outcomes(frame: EvalFrame, name: str, min_score: float | None = None) 
     above = scores >= frame_threshold(frame, min_score)
     found = np.zeros(len(frame.gt_boxes), dtype=bool)
     found[matched[above & (matched >= 0)]] = True
-    offset = frame.gt_boxes[:, :2] - np.asarray(frame.principal_point, dtype=np.float64)
-    radius_px = np.hypot(offset[:, 0], offset[:, 1])
-    circle_px = frame.camera.image_circle_radius_px() if frame.camera is not None else np.nan
+    radius_px, circle_px = _radii(frame, frame.gt_boxes)
     rows = []
     for g in range(len(frame.gt_boxes)):
         ious = match.iou[:, g]
@@ -93,24 +151,38 @@ def person_outcomes(frames: Sequence[EvalFrame], names: Sequence[str], min_score
             for row in frame_outcomes(frame, name, min_score)]
 
 
-def summarise_outcomes(rows: Sequence[PersonOutcome]) -> dict[str, dict[str, int]]:
-    """Counts of each outcome: overall (`all`), by ring of the image circle (RINGS; people of
-    frames without a camera in none) and by frame."""
-    groups: dict[str, list[PersonOutcome]] = {"all": list(rows)}
+def false_positives(frames: Sequence[EvalFrame], names: Sequence[str], min_score: float | None = None
+                    ) -> list[FalsePositive]:
+    """Every false positive of every frame (`names` parallel to `frames`)."""
+    return [row for frame, name in zip(frames, names, strict=True)
+            for row in frame_false_positives(frame, name, min_score)]
+
+
+def summarise_outcomes(rows: Sequence[PersonOutcome], errors: Sequence[FalsePositive] = ()
+                       ) -> dict[str, dict[str, int]]:
+    """Counts of each outcome and each kind of false positive: overall (`all`), by ring of the
+    image circle (`ring:nadir`, ... of RINGS; frames without a camera in none) and by frame
+    (`frame:NAME`)."""
+    groups: dict[str, tuple[list[PersonOutcome], list[FalsePositive]]] = {"all": (list(rows), list(errors))}
     for ring, (low, high) in RINGS.items():
-        groups[f"ring:{ring}"] = [r for r in rows if low <= r.radius_fraction < high]
-    for name in dict.fromkeys(r.frame for r in rows):
-        groups[f"frame:{name}"] = [r for r in rows if r.frame == name]
+        groups[f"ring:{ring}"] = ([r for r in rows if low <= r.radius_fraction < high],
+                                  [e for e in errors if low <= e.radius_fraction < high])
+    for name in dict.fromkeys([r.frame for r in rows] + [e.frame for e in errors]):
+        groups[f"frame:{name}"] = ([r for r in rows if r.frame == name],
+                                   [e for e in errors if e.frame == name])
     summary = {}
-    for key, members in groups.items():
-        counts = Counter(r.outcome for r in members)
-        summary[key] = {"people": len(members), **{o: counts.get(o, 0) for o in OUTCOMES}}
+    for key, (people, wrong) in groups.items():
+        outcomes, kinds = Counter(r.outcome for r in people), Counter(e.kind for e in wrong)
+        summary[key] = {"people": len(people), **{o: outcomes.get(o, 0) for o in OUTCOMES},
+                        "false_positives": len(wrong), **{k: kinds.get(k, 0) for k in FALSE_POSITIVES}}
     return summary
 
 
-def write_outcomes_csv(rows: Sequence[PersonOutcome], path: str | Path) -> None:
-    """One line per person, the columns of PersonOutcome (floats to 4 decimals, NaN empty)."""
-    fields = list(PersonOutcome.__dataclass_fields__)
+def write_rows_csv(rows: Sequence[PersonOutcome] | Sequence[FalsePositive], path: str | Path,
+                   row_type: type[PersonOutcome] | type[FalsePositive]) -> None:
+    """One line per row of `row_type` (its fields as columns; floats to 4 decimals, NaN empty); the
+    header alone when there are none."""
+    fields = list(row_type.__dataclass_fields__)
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     with open(path, "w", newline="", encoding="utf-8") as handle:
         writer = csv.DictWriter(handle, fieldnames=fields)

@@ -11,14 +11,21 @@ import pytest
 
 from detector.metrics import EvalFrame
 from detector.people import (
+    BACKGROUND,
+    DUPLICATE,
     FOUND,
+    LOOSE,
     LOOSE_BOX,
     LOW_SCORE,
     MISSED,
+    FalsePositive,
+    PersonOutcome,
+    false_positives,
+    frame_false_positives,
     frame_outcomes,
     person_outcomes,
     summarise_outcomes,
-    write_outcomes_csv,
+    write_rows_csv,
 )
 from fisheye import camera_from_dict
 
@@ -71,8 +78,31 @@ def test_a_detection_counts_for_one_person_only() -> None:
     assert sorted(r.outcome for r in rows) == [FOUND, LOW_SCORE]
 
 
+def test_each_kind_of_false_positive_by_hand() -> None:
+    # ABOVE found twice (the second a duplicate), RIGHT boxed 2.5× too long (IoU 0.4), a box where
+    # nobody stands, and one more where nobody stands below the threshold (not a false positive).
+    frame = _frame([ABOVE, RIGHT], [ABOVE, ABOVE, _longer(RIGHT, 2.5), LEFT, BELOW],
+                   [0.9, 0.8, 0.7, 0.6, 0.2])
+    errors = frame_false_positives(frame, "f")
+    assert [(e.kind, e.rank) for e in errors] == [(DUPLICATE, 1), (LOOSE, 2), (BACKGROUND, 3)]
+    assert errors[0].best_iou == pytest.approx(1.0) and errors[1].best_iou == pytest.approx(0.4, abs=1e-6)
+    assert errors[2].best_iou == 0.0 and errors[2].score == pytest.approx(0.6)
+    assert errors[1].along_px == pytest.approx(100.0) and errors[1].radius_px == pytest.approx(140.0)
+    # at 0.1 the box below the lens counts too; at 0.95 nothing does
+    assert [e.kind for e in frame_false_positives(frame, "f", min_score=0.1)][-1] == BACKGROUND
+    assert frame_false_positives(frame, "f", min_score=0.95) == []
+
+
+def test_a_detection_on_a_crowd_box_is_no_false_positive() -> None:
+    frame = EvalFrame(np.zeros((0, 4)), np.zeros((0, 2)), np.zeros(0), np.array([ABOVE]), np.array([0.9]),
+                      PP, CAMERA, crowd_boxes=np.array([ABOVE]), min_score=0.5)
+    assert frame_false_positives(frame, "f") == []
+
+
 def test_frames_without_people_or_detections() -> None:
     assert frame_outcomes(_frame([], [ABOVE], [0.9]), "f") == []
+    assert [e.kind for e in frame_false_positives(_frame([], [ABOVE], [0.9]), "f")] == [BACKGROUND]
+    assert frame_false_positives(_frame([ABOVE], [], []), "f") == []
     rows = frame_outcomes(_frame([ABOVE], [], []), "f")
     assert [r.outcome for r in rows] == [MISSED]
     assert rows[0].best_iou == 0.0 and math.isnan(rows[0].best_score) and math.isnan(rows[0].det_along_px)
@@ -80,20 +110,33 @@ def test_frames_without_people_or_detections() -> None:
 
 def test_summary_by_ring_and_frame_and_the_csv(tmp_path: Path) -> None:
     frames = [_frame([ABOVE, RIGHT, BELOW], [ABOVE, _longer(RIGHT, 2.5)], [0.9, 0.9]),
-              _frame([LEFT], [], [])]
+              _frame([LEFT], [RIGHT], [0.9])]
     rows = person_outcomes(frames, ["a", "b"])
-    summary = summarise_outcomes(rows)
-    assert summary["all"] == {"people": 4, FOUND: 1, LOW_SCORE: 0, LOOSE_BOX: 1, MISSED: 2}
-    assert summary["ring:nadir"] == {"people": 1, FOUND: 0, LOW_SCORE: 0, LOOSE_BOX: 0, MISSED: 1}
+    errors = false_positives(frames, ["a", "b"])
+    summary = summarise_outcomes(rows, errors)
+    assert summary["all"] == {"people": 4, FOUND: 1, LOW_SCORE: 0, LOOSE_BOX: 1, MISSED: 2,
+                              "false_positives": 2, DUPLICATE: 0, LOOSE: 1, BACKGROUND: 1}
+    assert summary["ring:nadir"] == {"people": 1, FOUND: 0, LOW_SCORE: 0, LOOSE_BOX: 0, MISSED: 1,
+                                     "false_positives": 0, DUPLICATE: 0, LOOSE: 0, BACKGROUND: 0}
     assert summary["ring:middle"]["people"] == 2 and summary["ring:rim"][LOOSE_BOX] == 1
+    assert summary["ring:rim"]["false_positives"] == 2  # both at RIGHT, 140 of 157 px out
     assert summary["frame:a"]["people"] == 3 and summary["frame:b"] == {
-        "people": 1, FOUND: 0, LOW_SCORE: 0, LOOSE_BOX: 0, MISSED: 1}
+        "people": 1, FOUND: 0, LOW_SCORE: 0, LOOSE_BOX: 0, MISSED: 1,
+        "false_positives": 1, DUPLICATE: 0, LOOSE: 0, BACKGROUND: 1}
+    empty = summarise_outcomes([])
+    assert list(empty) == ["all", "ring:nadir", "ring:middle", "ring:rim"]
+    assert all(count == 0 for counts in empty.values() for count in counts.values())
+    fp_path = tmp_path / "fp.csv"
+    write_rows_csv(errors, fp_path, FalsePositive)
+    assert [r["kind"] for r in csv.DictReader(fp_path.read_text().splitlines())] == [LOOSE, BACKGROUND]
+    write_rows_csv([], fp_path, FalsePositive)
+    assert fp_path.read_text().splitlines() == [",".join(FalsePositive.__dataclass_fields__)]
     path = tmp_path / "people.csv"
-    write_outcomes_csv(rows, path)
+    write_rows_csv(rows, path, PersonOutcome)
     read = list(csv.DictReader(path.read_text().splitlines()))
     assert [r["outcome"] for r in read] == [r.outcome for r in rows]
     assert read[0]["frame"] == "a" and float(read[0]["best_iou"]) == 1.0
-    assert read[3]["best_score"] == "" and read[3]["distance_m"] == ""  # NaN: empty
+    assert float(read[3]["best_iou"]) == 0.0 and read[3]["distance_m"] == ""  # NaN: empty
     with pytest.raises(ValueError):
         person_outcomes(frames, ["a"])
 
@@ -111,9 +154,9 @@ def test_fishloc_eval_writes_each_persons_outcome(tmp_path: Path) -> None:
         "annotations": [{"id": k, "image_id": "e", "category_id": 1,
                          "bbox": [120.0 + 40 * k, 120.0, 20.0, 50.0, 0.0]} for k in range(3)],
     }))
-    out, people = tmp_path / "metrics.json", tmp_path / "people.csv"
+    out, people, wrong = tmp_path / "metrics.json", tmp_path / "people.csv", tmp_path / "fp.csv"
     assert main(["eval", "--model", str(DEFAULT_MODEL_PATH), "--data", str(data), "--json", str(out),
-                 "--people", str(people)]) == 0
+                 "--people", str(people), "--false-positives", str(wrong)]) == 0
     metrics = json.loads(out.read_text())
     counts = metrics["people"]["all"]
     assert counts["people"] == metrics["num_gt"] == 3
@@ -121,3 +164,4 @@ def test_fishloc_eval_writes_each_persons_outcome(tmp_path: Path) -> None:
     assert counts[FOUND] == round(metrics["recall"] * 3)  # nobody stands in a grey frame
     rows = list(csv.DictReader(people.read_text().splitlines()))
     assert [(r["frame"], r["person"]) for r in rows] == [("e", "0"), ("e", "1"), ("e", "2")]
+    assert len(list(csv.DictReader(wrong.read_text().splitlines()))) == counts["false_positives"]
