@@ -97,7 +97,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                             "nanodet-plus-m: ../shared/pretrained/nanodet-plus-m_416.onnx, no foot)")
     polar.add_argument("--freeze", nargs="*", default=None, choices=(*STAGES, *NANODET_STAGES[:1]),
                        help="network stages kept frozen (default: stem dark2 dark3, NanoDet's backbone; "
-                            "none: no stage)")
+                            "none: no stage); head.stems ... head.obj_preds freeze the head's parts")
     polar.add_argument("--inner-head", type=float, default=0.0, metavar="FRACTION",
                        help="design (c): a second head for the disc within FRACTION of the strip's "
                             "radius (e.g. 0.3); train it alone with --freeze stem dark2 dark3 dark4 dark5 "

@@ -8,7 +8,9 @@ label says otherwise (`detector.yolox.loss`). A run that goes on from a fine-tun
 name another teacher (`teacher`: e.g. the COCO network itself, so that what the checkpoint's head
 already traded away is held to COCO and not to the checkpoint). The first backbone stages stay
 frozen (`freeze`; `foot` freezes the foot branch, so a head trained on its own leaves the feet as
-they were).
+they were; the head's parts can be frozen one by one, `head.reg_preds` ... of HEAD_PARTS: with all
+but `head.reg_preds` frozen a run refits the boxes alone and every score stays as it was, since
+YOLOX reads objectness and class from features that `reg_preds` does not feed).
 
 Checkpoints go to `OUT/last.pt` every `checkpoint_every_s` seconds and at each epoch's end, with
 weights, teacher, optimizer, schedule, RNG states, the epoch and the batch within it; the epoch's
@@ -65,7 +67,11 @@ LAST = "last.pt"
 BEST = "best.pt"
 TRAINER_KINDS = {POLAR_ARCH: "polar-finetune", FISHEYE_ARCH: "fisheye-finetune"}
 VIEWS = {POLAR_ARCH: "polar", FISHEYE_ARCH: "fisheye"}  # `fishloc train --view`
-STAGES = ("stem", "dark2", "dark3", "dark4", "dark5", "neck", "head", "inner_head", "foot")
+# the head's parts (`detector.yolox.head`): its stems, then the class and the box branch, whose
+# features feed both the boxes (reg_preds) and the objectness (obj_preds)
+HEAD_PARTS = ("head.stems", "head.cls_convs", "head.cls_preds", "head.reg_convs", "head.reg_preds",
+              "head.obj_preds")
+STAGES = ("stem", "dark2", "dark3", "dark4", "dark5", "neck", "head", *HEAD_PARTS, "inner_head", "foot")
 OPTIONAL_STAGES = ("inner_head", "foot")  # frozen where the network has them, ignored where not
 NANODET_STAGES = ("backbone", "neck", "head")  # what --freeze names of a NanoDet-Plus
 

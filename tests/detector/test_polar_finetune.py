@@ -216,6 +216,31 @@ def test_resume_mid_epoch_equals_training_straight(
     assert [r["epoch"] for r in last] == [1, 2]
 
 
+def test_the_boxes_alone_refit_and_every_score_stays(
+        pretrained: YoloxNano, toy_dataset: Callable[..., Path], tmp_path: Path) -> None:
+    """All but `head.reg_preds` frozen: the boxes learn, and the objectness and class maps (read
+    from features `reg_preds` does not feed) come out bit for bit as before."""
+    frames = read_dataset(toy_dataset(count=4, size=128, people=2))
+    everything_else = ("stem", "dark2", "dark3", "dark4", "dark5", "neck", "head.stems", "head.cls_convs",
+                       "head.cls_preds", "head.reg_convs", "head.obj_preds")
+    config = FinetuneConfig(epochs=2, batch_size=2, lr=1e-2, warmup_steps=1, seed=4, device="cpu",
+                            freeze=everything_else, distill=1.0, augment=StripAugment.none())
+    tuner = Finetuner(CONFIG, config, tmp_path / "boxes", pretrained, frames, None, "toy", progress=False)
+    first = tuner.train_step([0, 1])
+    tuner.fit()
+    last = tuner.train_step([0, 1])
+    trained, initial = tuner.model.state_dict(), pretrained.state_dict()
+    changed = {k for k in initial if not torch.equal(trained[k], initial[k])}
+    assert changed and all(k.startswith("head.reg_preds.") for k in changed)
+    assert last["iou"] < first["iou"]
+    dataset = PolarStripDataset(frames, CONFIG, StripAugment.none())
+    images, _ = collate_strips([dataset[0], dataset[1]])
+    with torch.no_grad():
+        before, after = pretrained.eval()(images), tuner.model.eval()(images)
+    for old, new in zip(before, after, strict=True):  # (B, 4 + 1 + classes, h, w) per level
+        assert torch.equal(new[:, 4:], old[:, 4:]) and not torch.equal(new[:, :4], old[:, :4])
+
+
 def _cli(out: Path, data: Path, *extra: str) -> int:
     return main(["train", "--init-from", str(ONNX_PATH), "--data", str(data), "--out", str(out),
                  "--quiet", "--threads", "1", *STRIP, *extra])
