@@ -57,14 +57,7 @@ from detector.operating_point import (
     describe,
     sweep,
 )
-from detector.people import (
-    FalsePositive,
-    PersonOutcome,
-    false_positives,
-    person_outcomes,
-    summarise_outcomes,
-    write_rows_csv,
-)
+from detector.people import FalsePositive, PersonOutcome, breakdown, summarise_outcomes, write_rows_csv
 from detector.plots import plot_pe_by_distance, plot_pr_curve
 from fisheye import FisheyeCamera, assumed_camera
 from fisheye.boxes import cepdof_to_corners
@@ -298,9 +291,7 @@ def run(args: argparse.Namespace) -> int:
         ious = sorted({point.nms_iou for point in predictor.points_used})
         extra["nms_iou"] = ious[0] if len(ious) == 1 else ious
     if args.people or args.false_positives:
-        names = [str(f.image_id) for f in frames]
-        outcomes = person_outcomes(evaluation.frames, names)
-        errors = false_positives(evaluation.frames, names)
+        outcomes, errors = breakdown(evaluation.frames, [str(f.image_id) for f in frames])
         if args.people:
             write_rows_csv(outcomes, args.people, PersonOutcome)
         if args.false_positives:

@@ -85,20 +85,57 @@ def _radii(frame: EvalFrame, boxes: np.ndarray) -> tuple[np.ndarray, float]:
     return np.hypot(offset[:, 0], offset[:, 1]), circle_px
 
 
-def frame_false_positives(frame: EvalFrame, name: str, min_score: float | None = None) -> list[FalsePositive]:
-    """Each false positive of `frame` at `min_score` (None: the frame's own threshold)."""
+def frame_breakdown(frame: EvalFrame, name: str, min_score: float | None = None
+                    ) -> tuple[list[PersonOutcome], list[FalsePositive]]:
+    """The outcome of each person of `frame` and each of its false positives, at `min_score` (None:
+    the frame's own threshold), from one matching."""
     match = prepare_match(frame)
     matched = greedy_match(match.iou, 0.5)
     scores = frame.det_scores[match.order]
-    false = (scores >= frame_threshold(frame, min_score)) & (matched < 0) & ~match.ignored(matched, 0.5)
-    taken = np.zeros(len(frame.gt_boxes), dtype=bool)
-    taken[matched[matched >= 0]] = True
     boxes = frame.det_boxes[match.order]
+    above = scores >= frame_threshold(frame, min_score)
+    found = np.zeros(len(frame.gt_boxes), dtype=bool)
+    found[matched[above & (matched >= 0)]] = True
+    return (_outcomes(frame, name, match.iou, found, scores, boxes),
+            _false_positives(frame, name, match.iou, above & (matched < 0) & ~match.ignored(matched, 0.5),
+                             scores, boxes))
+
+
+def _outcomes(frame: EvalFrame, name: str, iou: np.ndarray, found: np.ndarray, scores: np.ndarray,
+              boxes: np.ndarray) -> list[PersonOutcome]:
+    """Each person's outcome from the (D, G) `iou` of the score-sorted detections (`scores`,
+    `boxes`) with the people and whether each was `found` (G,)."""
+    radius_px, circle_px = _radii(frame, frame.gt_boxes)
+    rows = []
+    for g in range(len(frame.gt_boxes)):
+        best = int(np.argmax(iou[:, g])) if len(iou) else -1
+        best_iou = float(iou[best, g]) if best >= 0 else 0.0
+        if found[g]:
+            outcome = FOUND
+        elif best_iou >= 0.5:
+            outcome = LOW_SCORE
+        elif best_iou >= LOOSE_IOU:
+            outcome = LOOSE_BOX
+        else:
+            outcome = MISSED
+        det = boxes[best] if best >= 0 else np.full(4, np.nan)
+        rows.append(PersonOutcome(
+            frame=name, person=g, outcome=outcome, radius_px=float(radius_px[g]),
+            radius_fraction=float(radius_px[g] / circle_px), distance_m=float(frame.gt_distances_m[g]),
+            along_px=float(frame.gt_boxes[g, 3]), across_px=float(frame.gt_boxes[g, 2]),
+            best_iou=best_iou, best_score=float(scores[best]) if best >= 0 else float("nan"),
+            det_along_px=float(det[3]), det_across_px=float(det[2])))
+    return rows
+
+
+def _false_positives(frame: EvalFrame, name: str, iou: np.ndarray, false: np.ndarray, scores: np.ndarray,
+                     boxes: np.ndarray) -> list[FalsePositive]:
+    """Each `false` (D,) detection of the score-sorted ones (`scores`, `boxes`), its kind from its
+    row of the (D, G) `iou`."""
     radius_px, circle_px = _radii(frame, boxes)
     rows = []
     for d in np.flatnonzero(false):
-        ious = match.iou[d]
-        best_iou = float(ious.max()) if len(ious) else 0.0
+        best_iou = float(iou[d].max()) if iou.shape[1] else 0.0
         if best_iou >= 0.5:  # unmatched at 0.5, so every person it overlaps so was taken before it
             kind = DUPLICATE
         elif best_iou >= LOOSE_IOU:
@@ -112,50 +149,17 @@ def frame_false_positives(frame: EvalFrame, name: str, min_score: float | None =
     return rows
 
 
-def frame_outcomes(frame: EvalFrame, name: str, min_score: float | None = None) -> list[PersonOutcome]:
-    """The outcome of each person of `frame` at `min_score` (None: the frame's own threshold)."""
-    match = prepare_match(frame)
-    matched = greedy_match(match.iou, 0.5)
-    scores = frame.det_scores[match.order]
-    above = scores >= frame_threshold(frame, min_score)
-    found = np.zeros(len(frame.gt_boxes), dtype=bool)
-    found[matched[above & (matched >= 0)]] = True
-    radius_px, circle_px = _radii(frame, frame.gt_boxes)
-    rows = []
-    for g in range(len(frame.gt_boxes)):
-        ious = match.iou[:, g]
-        best = int(np.argmax(ious)) if len(ious) else -1
-        best_iou = float(ious[best]) if best >= 0 else 0.0
-        if found[g]:
-            outcome = FOUND
-        elif best_iou >= 0.5:
-            outcome = LOW_SCORE
-        elif best_iou >= LOOSE_IOU:
-            outcome = LOOSE_BOX
-        else:
-            outcome = MISSED
-        det = frame.det_boxes[match.order[best]] if best >= 0 else np.full(4, np.nan)
-        rows.append(PersonOutcome(
-            frame=name, person=g, outcome=outcome, radius_px=float(radius_px[g]),
-            radius_fraction=float(radius_px[g] / circle_px), distance_m=float(frame.gt_distances_m[g]),
-            along_px=float(frame.gt_boxes[g, 3]), across_px=float(frame.gt_boxes[g, 2]),
-            best_iou=best_iou, best_score=float(scores[best]) if best >= 0 else float("nan"),
-            det_along_px=float(det[3]), det_across_px=float(det[2])))
-    return rows
-
-
-def person_outcomes(frames: Sequence[EvalFrame], names: Sequence[str], min_score: float | None = None
-                    ) -> list[PersonOutcome]:
-    """Every person of every frame (`names` parallel to `frames`)."""
-    return [row for frame, name in zip(frames, names, strict=True)
-            for row in frame_outcomes(frame, name, min_score)]
-
-
-def false_positives(frames: Sequence[EvalFrame], names: Sequence[str], min_score: float | None = None
-                    ) -> list[FalsePositive]:
-    """Every false positive of every frame (`names` parallel to `frames`)."""
-    return [row for frame, name in zip(frames, names, strict=True)
-            for row in frame_false_positives(frame, name, min_score)]
+def breakdown(frames: Sequence[EvalFrame], names: Sequence[str], min_score: float | None = None
+              ) -> tuple[list[PersonOutcome], list[FalsePositive]]:
+    """Every person's outcome and every false positive of every frame (`names` parallel to
+    `frames`)."""
+    outcomes: list[PersonOutcome] = []
+    errors: list[FalsePositive] = []
+    for frame, name in zip(frames, names, strict=True):
+        people, wrong = frame_breakdown(frame, name, min_score)
+        outcomes += people
+        errors += wrong
+    return outcomes, errors
 
 
 def summarise_outcomes(rows: Sequence[PersonOutcome], errors: Sequence[FalsePositive] = ()

@@ -20,10 +20,8 @@ from detector.people import (
     MISSED,
     FalsePositive,
     PersonOutcome,
-    false_positives,
-    frame_false_positives,
-    frame_outcomes,
-    person_outcomes,
+    breakdown,
+    frame_breakdown,
     summarise_outcomes,
     write_rows_csv,
 )
@@ -45,6 +43,14 @@ def _frame(gt: list[list[float]], dets: list[list[float]], scores: list[float],
     return EvalFrame(gt_boxes, np.full((len(gt_boxes), 2), np.nan), np.full(len(gt_boxes), np.nan),
                      np.array(dets, dtype=float).reshape(-1, 4), np.array(scores, dtype=float), PP, CAMERA,
                      min_score=min_score)
+
+
+def frame_outcomes(frame: EvalFrame, name: str, min_score: float | None = None) -> list[PersonOutcome]:
+    return frame_breakdown(frame, name, min_score)[0]
+
+
+def frame_false_positives(frame: EvalFrame, name: str, min_score: float | None = None) -> list[FalsePositive]:
+    return frame_breakdown(frame, name, min_score)[1]
 
 
 def _longer(box: list[float], factor: float) -> list[float]:
@@ -111,8 +117,7 @@ def test_frames_without_people_or_detections() -> None:
 def test_summary_by_ring_and_frame_and_the_csv(tmp_path: Path) -> None:
     frames = [_frame([ABOVE, RIGHT, BELOW], [ABOVE, _longer(RIGHT, 2.5)], [0.9, 0.9]),
               _frame([LEFT], [RIGHT], [0.9])]
-    rows = person_outcomes(frames, ["a", "b"])
-    errors = false_positives(frames, ["a", "b"])
+    rows, errors = breakdown(frames, ["a", "b"])
     summary = summarise_outcomes(rows, errors)
     assert summary["all"] == {"people": 4, FOUND: 1, LOW_SCORE: 0, LOOSE_BOX: 1, MISSED: 2,
                               "false_positives": 2, DUPLICATE: 0, LOOSE: 1, BACKGROUND: 1}
@@ -138,7 +143,7 @@ def test_summary_by_ring_and_frame_and_the_csv(tmp_path: Path) -> None:
     assert read[0]["frame"] == "a" and float(read[0]["best_iou"]) == 1.0
     assert float(read[3]["best_iou"]) == 0.0 and read[3]["distance_m"] == ""  # NaN: empty
     with pytest.raises(ValueError):
-        person_outcomes(frames, ["a"])
+        breakdown(frames, ["a"])
 
 
 def test_fishloc_eval_writes_each_persons_outcome(tmp_path: Path) -> None:

@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
 import math
@@ -236,7 +237,7 @@ def test_the_boxes_alone_refit_and_every_score_stays(
     dataset = PolarStripDataset(frames, CONFIG, StripAugment.none())
     images, _ = collate_strips([dataset[0], dataset[1]])
     with torch.no_grad():
-        before, after = pretrained.eval()(images), tuner.model.eval()(images)
+        before, after = copy.deepcopy(pretrained).eval()(images), tuner.model.eval()(images)
     for old, new in zip(before, after, strict=True):  # (B, 4 + 1 + classes, h, w) per level
         assert torch.equal(new[:, 4:], old[:, 4:]) and not torch.equal(new[:, :4], old[:, :4])
 
