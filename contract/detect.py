@@ -24,6 +24,7 @@ from contract.views import (
     DEFAULT_VIEW,
     InputMapping,
     PlannedInput,
+    camera_view,
     mapping_layout,
     min_decoded_side,
     nadir_input,
@@ -263,8 +264,9 @@ class ModelRunner:
         info = self.model.info
         found = []
         for rgb, camera in zip(frames_rgb, cameras, strict=True):
-            reduced = reduce_like_decode(rgb, min_decoded_side(info, camera, self.view))
-            images, mapping = view_inputs(info, reduced, camera, self.view)
+            view = camera_view(self.view, camera)  # a camera's record may set its own budget
+            reduced = reduce_like_decode(rgb, min_decoded_side(info, camera, view))
+            images, mapping = view_inputs(info, reduced, camera, view)
             pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
             raw = run_view(self.model, images, mapping)
             found.append(FrameOutputs(raw, mapping, pp))

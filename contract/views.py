@@ -189,6 +189,15 @@ def view_reference(info: ModelInfo) -> ViewReference:
                          max_theta_deg=info.polar.max_theta_deg)
 
 
+def camera_view(config: ViewPlanConfig, camera: FisheyeCamera, limit: int | None = None) -> ViewPlanConfig:
+    """How `camera`'s view is planned: `config` with the camera's own budget (its record's
+    `max_view_pixels`) in place of `config`'s, at most `limit` where one is given."""
+    own = camera.max_view_pixels
+    if own is None:
+        return config
+    return dataclasses.replace(config, max_pixels=own if limit is None else min(own, limit))
+
+
 @functools.lru_cache(maxsize=256)
 def _cached_plan(reference: ViewReference, camera_json: str, config: ViewPlanConfig) -> ViewPlan:
     return plan_view(FisheyeCamera.model_validate_json(camera_json), reference, config)

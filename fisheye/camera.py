@@ -31,6 +31,9 @@ DEFAULT_MAX_THETA_DEG = 90.0
 _ASPECT_TOLERANCE_PX = 1.0
 # Real lenses have |k| well under 10; far larger values only overflow the lens arithmetic.
 _MAX_KB_ABS = 1000.0
+# The range of a view budget (model-input px): a camera's own, the server's (`service.core.config`).
+MIN_VIEW_PIXELS = 64 * 64
+MAX_VIEW_PIXELS = 64_000_000
 
 
 @dataclass(frozen=True)
@@ -71,6 +74,10 @@ class FisheyeCamera(BaseModel):
     site: str | None = Field(default=None, pattern=CAMERA_ID_PATTERN,
                              description="The site (floor plan) the camera belongs to.")
     site_pose: SitePose | None = None
+    max_view_pixels: int | None = Field(
+        default=None, ge=MIN_VIEW_PIXELS, le=MAX_VIEW_PIXELS,
+        description="This camera's own budget for a planned view (model-input px, width × height), in "
+                    "place of the server's --max-view-pixels and at most its --max-camera-view-pixels.")
 
     @field_validator("id")
     @classmethod

@@ -187,6 +187,9 @@ class ViewPlan:
     reference_pixels: int
     notes: tuple[str, ...] = field(default_factory=tuple)
     nadir: NadirPiece | None = None
+    # Input px of the view the camera's people ask for (every band at the scale it wants, and the
+    # nadir view), before any budget: a budget of at least this plans it whole.
+    wanted_pixels: int = 0
 
     @property
     def owned_px(self) -> tuple[tuple[float, float], ...]:
@@ -212,7 +215,7 @@ class ViewPlan:
     def public(self) -> dict[str, object]:
         """The plan as `GET /v1/cameras/{id}` reports it."""
         return {
-            "input_wh": list(self.canvas_wh), "pixels": self.pixels,
+            "input_wh": list(self.canvas_wh), "pixels": self.pixels, "wanted_pixels": self.wanted_pixels,
             "cost_ratio": round(self.cost_ratio, 3), "layout": self.layout,
             "bands": [{"inner_radius_px": round(b.inner_radius_px, 1), "radius_px": round(b.radius_px, 1),
                        "scale": b.scale, "rows": b.rows, "pieces": b.pieces} for b in self.bands],
@@ -447,6 +450,8 @@ def plan_view(camera: FisheyeCamera, reference: ViewReference | None = None,
         raise ViewPlanError("no floor point of the frame lies in view of the lens")
     need = np.where(seen, _needed_scale(along, across, rows_per_px, reference, config), 0.0)
     wanted = _bands(camera, radii, need, seen, top, rows_per_px, config)
+    wanted_pixels = _pixels(_layout(camera, _with_pieces(wanted), reference, config)) + (
+        nadir_side(reference, config) or 0) ** 2
     bands, layout, notes = _within_budget(camera, wanted, top, rows_per_px, reference, config)
     trimmed = _strip_from(bands, camera, rows_per_px, config)
     if trimmed is not None:  # with the nadir view the strip may leave it the disc: fewer rows
@@ -469,7 +474,8 @@ def plan_view(camera: FisheyeCamera, reference: ViewReference | None = None,
     if ring > edge + 0.5:
         notes.append(f"the frame cuts the image circle ({ring:.0f} px radius, {edge:.0f} px to the nearest "
                      f"edge): the view reaches {top:.0f} px, the frame's corners included")
-    return ViewPlan(grids, offsets, canvas, tuple(bands), smallest, reference.pixels, tuple(notes), nadir)
+    return ViewPlan(grids, offsets, canvas, tuple(bands), smallest, reference.pixels, tuple(notes), nadir,
+                    wanted_pixels)
 
 
 def _strip_from(bands: list[ViewBand], camera: FisheyeCamera, rows_per_px: float, config: ViewPlanConfig

@@ -28,7 +28,7 @@ from contract import (
     view_inputs,
 )
 from contract import select_detections as select_raw
-from contract.views import DEFAULT_VIEW, mapping_layout, view_plan, view_reference
+from contract.views import DEFAULT_VIEW, camera_view, mapping_layout, view_plan, view_reference
 from fisheye import FisheyeCamera, cxcywh_to_corners, foot_points, radial_angles_rad
 from fisheye.view_plan import ViewPlan, ViewPlanConfig, ViewPlanError, may_have_nadir, nadir_side
 from service.frame_decode import DecodedFrame, FrameError, check_frame_size, decode_frame, read_header
@@ -37,6 +37,10 @@ from service.result import DetectionResult, Detections
 FloatArray = NDArray[np.float64]
 
 log = logging.getLogger(__name__)
+
+
+class ViewBudgetError(ViewPlanError):
+    """A camera record asking for a view budget over the server's limit."""
 
 
 @dataclass(frozen=True)
@@ -48,12 +52,16 @@ class PipelineConfig:
     max_pixels: int = 40_000_000
     min_frame_side_px: int = 16  # smaller frames cannot show a person; refused, not guessed at
     view: ViewPlanConfig = DEFAULT_VIEW  # how a planned model's views are planned (its budget)
+    # the largest budget a camera's record may set for its own view (None: any)
+    max_camera_view_pixels: int | None = None
 
     def __post_init__(self) -> None:
         if self.nms_iou is not None and not 0.0 < self.nms_iou <= 1.0:
             raise ValueError(f"nms_iou must be in (0, 1], got {self.nms_iou}")
         if self.max_detections < 1 or self.max_pixels < 1:
             raise ValueError("max_detections and max_pixels must be positive")
+        if self.max_camera_view_pixels is not None and self.max_camera_view_pixels < 1:
+            raise ValueError("max_camera_view_pixels must be positive")
 
 
 def localize(boxes_frame: FloatArray, scores: FloatArray, camera: FisheyeCamera,
@@ -127,14 +135,15 @@ class Pipeline:
             frame_camera = camera.scaled_to(header.size_wh)
         except ValueError as error:
             raise FrameError("frame_size_mismatch", str(error)) from None
+        view = self.view_config(camera)
         try:
-            smallest_side = min_decoded_side(self.info, frame_camera, self.config.view)
+            smallest_side = min_decoded_side(self.info, frame_camera, view)
         except ViewPlanError as error:
             raise FrameError("view_unplannable", f"camera {camera.id}: {error}") from None
         frame = decode_frame(data, smallest_side, self.config.max_pixels, header)
         decoded = time.perf_counter()
 
-        images, mapping = view_inputs(self.info, frame.rgb, frame_camera, self.config.view)
+        images, mapping = view_inputs(self.info, frame.rgb, frame_camera, view)
         preprocessed = time.perf_counter()
 
         raw = run_view(self.model, images, mapping)
@@ -166,7 +175,23 @@ class Pipeline:
         fixed). ViewPlanError when none can be made."""
         if not self.info.planned:
             return None
-        return view_plan(self.info, camera, self.config.view)
+        return view_plan(self.info, camera, self.view_config(camera))
+
+    def view_config(self, camera: FisheyeCamera) -> ViewPlanConfig:
+        """How `camera`'s view is planned: the configured view with the camera's own budget where
+        its record sets one, at most `max_camera_view_pixels` (a record written before that limit
+        was lowered is planned at the limit)."""
+        return camera_view(self.config.view, camera, self.config.max_camera_view_pixels)
+
+    def admit(self, camera: FisheyeCamera) -> ViewPlan | None:
+        """The view planned for a camera about to be written to the registry (None: the model's
+        view is fixed). ViewPlanError when its record asks for a budget over the limit or no view
+        can be made: nothing is written then."""
+        own, limit = camera.max_view_pixels, self.config.max_camera_view_pixels
+        if own is not None and limit is not None and own > limit:
+            raise ViewBudgetError(f"its max_view_pixels {own} is over this server's limit {limit} "
+                                  f"(--max-camera-view-pixels)")
+        return self.plan(camera)
 
     def point(self, layout: str | None) -> OperatingPoint:
         """The operating point of a view of `layout` (`ViewPlan.layout`; None: a fixed view): the

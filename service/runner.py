@@ -164,8 +164,9 @@ def build_runner(settings: Settings, metrics: ServiceMetrics) -> InferenceRunner
     cv2.setNumThreads(1)
     model = OnnxModel(settings.model, SessionThreads(intra_op=settings.threads, inter_op=1))
     view = dataclasses.replace(DEFAULT_VIEW, max_pixels=settings.max_view_pixels)
-    pipeline = Pipeline(model, PipelineConfig(nms_iou=settings.nms_iou, max_pixels=settings.max_pixels,
-                                              view=view))
+    pipeline = Pipeline(model, PipelineConfig(
+        nms_iou=settings.nms_iou, max_pixels=settings.max_pixels, view=view,
+        max_camera_view_pixels=settings.max_camera_view_pixels))
     config = RunnerConfig(threads=settings.threads, max_in_flight=settings.in_flight_limit,
                           retry_after_s=settings.retry_after_s)
     return InferenceRunner(pipeline, config, metrics)

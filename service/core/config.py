@@ -13,6 +13,7 @@ from typing import Annotated
 from pydantic import AliasChoices, Field, SecretStr, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
+from fisheye.camera import MAX_VIEW_PIXELS, MIN_VIEW_PIXELS
 from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
 from service.core.cpu import cpu_budget
 
@@ -60,9 +61,13 @@ class Settings(BaseSettings):
     keep_alive_timeout_s: int = Field(5, ge=1, description="idle time before a keep-alive connection closes")
     max_body_bytes: int = Field(32 * 1024 * 1024, ge=1024, description="largest encoded frame accepted")
     max_pixels: int = Field(40_000_000, ge=1, description="largest decoded frame (width × height)")
-    max_view_pixels: int = Field(900_000, ge=4096, le=64_000_000,
+    max_view_pixels: int = Field(900_000, ge=MIN_VIEW_PIXELS, le=MAX_VIEW_PIXELS,
                                  description="largest model input a camera's planned view may take "
-                                             "(width × height; a planned model only)")
+                                             "(width × height; a planned model only), unless the "
+                                             "camera has its own budget (`max_view_pixels` of its record)")
+    max_camera_view_pixels: int = Field(4_000_000, ge=MIN_VIEW_PIXELS, le=MAX_VIEW_PIXELS,
+                                        description="the largest budget a camera's record may ask for "
+                                                    "(its `max_view_pixels`)")
     threads: int = Field(default_factory=cpu_budget, ge=1,
                          description="inference threads (default: the CPU quota of the container)")
     max_in_flight: int | None = Field(None, ge=1,

@@ -126,6 +126,8 @@ def camera_to_message(camera: FisheyeCamera) -> pb.Camera:
         message.tilt_deg.CopyFrom(pb.Point(x=camera.tilt_deg[0], y=camera.tilt_deg[1]))
     for polygon in camera.masks_px or []:
         message.masks_px.append(pb.Polygon(points=[pb.Point(x=u, y=v) for u, v in polygon]))
+    if camera.max_view_pixels is not None:
+        message.max_view_pixels = camera.max_view_pixels
     return message
 
 
@@ -149,6 +151,8 @@ def message_to_camera(message: pb.Camera) -> FisheyeCamera:
     if message.masks_px:
         record["masks_px"] = [[[point.x, point.y] for point in polygon.points]
                               for polygon in message.masks_px]
+    if message.HasField("max_view_pixels"):
+        record["max_view_pixels"] = message.max_view_pixels
     return camera_from_dict(record)
 
 

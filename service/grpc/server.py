@@ -18,6 +18,7 @@ from grpc_reflection.v1alpha import reflection
 
 from fisheye import CalibrationError, FisheyeCamera
 from fisheye.camera import CAMERA_ID_PATTERN
+from fisheye.view_plan import ViewPlanError
 from protos.fishloc.v1 import localizer_pb2 as pb
 from protos.fishloc.v1 import localizer_pb2_grpc as pb_grpc
 from service.core.capture_time import CaptureTimeError, check_unix_s
@@ -33,6 +34,7 @@ from service.grpc.convert import (
 )
 from service.grpc.stream import FrameStream
 from service.http.dependencies import ServiceState, bearer_matches, read_token_passes
+from service.pipeline import ViewBudgetError
 from service.result import DetectionResult
 from service.runner import OverloadedError
 from service.sites.interface import SitesUnavailableError
@@ -240,6 +242,11 @@ class LocalizerServicer:
             camera = message_to_camera(request.camera)
         except CalibrationError as error:
             await _abort(context, grpc.StatusCode.INVALID_ARGUMENT, str(error))
+        try:  # nothing is saved for a view that cannot be planned or a budget over the limit
+            await asyncio.to_thread(self.state.runner.pipeline.admit, camera)
+        except ViewPlanError as error:
+            code = "view_budget_over_limit" if isinstance(error, ViewBudgetError) else "view_unplannable"
+            await _abort(context, grpc.StatusCode.INVALID_ARGUMENT, f"{code}: camera {camera.id}: {error}")
         outcome = await asyncio.to_thread(self.state.registry.put, camera)
         await asyncio.to_thread(self.state.sites.camera_changed, camera.id, outcome.camera)
         return pb.PutCameraResponse(camera=camera_to_message(outcome.camera), created=outcome.created)

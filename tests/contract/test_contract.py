@@ -7,6 +7,7 @@ import dataclasses
 from collections.abc import Callable
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from polar_double import BOX_WH, METADATA, OVERLAP, SCORE, WIDTH, save_polar_double
@@ -14,17 +15,18 @@ from polar_double import BOX_WH, METADATA, OVERLAP, SCORE, WIDTH, save_polar_dou
 from contract import (
     ModelError,
     ModelInfo,
+    ModelRunner,
     OnnxModel,
     PolarSpec,
     SessionThreads,
     metadata_props,
     parse_metadata,
 )
-from contract.views import DEFAULT_VIEW, view_reference
+from contract.views import DEFAULT_VIEW, mapping_layout, view_reference
 from fisheye import FisheyeCamera, camera_from_dict, foot_points
 from fisheye.view_plan import nadir_side
 from service.frame_decode import FrameError
-from service.pipeline import Pipeline, PipelineConfig
+from service.pipeline import Pipeline, PipelineConfig, ViewBudgetError
 
 CAMERA = {"id": "cam", "altitude_m": 3.0, "image_size": [1024, 1024], "principal_point": [511.5, 511.5],
           "focal_px": [320.0, 320.0], "kb": [1.0]}
@@ -161,6 +163,32 @@ def test_a_planned_outer_band_maps_its_boxes_to_the_frame(tmp_path: Path) -> Non
     assert box[3] == pytest.approx(BOX_WH[1] / rows_per_px, rel=0.01)
     assert np.dot(offset, ray) == pytest.approx(np.linalg.norm(uv - pp), abs=2.0)
     np.testing.assert_allclose(detections.foot_px[0], uv - ray * box[3] / 2, atol=2.0)
+
+
+def test_a_camera_record_plans_its_own_view_within_the_limit(tmp_path: Path) -> None:
+    # The server's budget gives this camera one band; its record's own budget, two (the evaluation's
+    # runner and the service's pipeline alike); over the limit, the record is planned at the limit.
+    path = save_polar_double(tmp_path / "planned.onnx", foot=True, planned=True)
+    model = OnnxModel(path, SessionThreads(1))
+    view = dataclasses.replace(DEFAULT_VIEW, max_pixels=40_000)  # the double's strip is 64 rows
+    pipeline = Pipeline(model, PipelineConfig(view=view, max_camera_view_pixels=90_000))
+    server, own = camera_from_dict(CAMERA), camera_from_dict({**CAMERA, "max_view_pixels": 80_000})
+    server_plan, own_plan = pipeline.plan(server), pipeline.plan(own)
+    assert server_plan is not None and own_plan is not None
+    assert server_plan.layout == "1band+nadir" and own_plan.layout == "2band+nadir"
+    assert server_plan.pixels <= 40_000 < own_plan.pixels == server_plan.wanted_pixels <= 80_000
+    assert pipeline.admit(own) == own_plan
+    over = camera_from_dict({**CAMERA, "max_view_pixels": 90_001})
+    with pytest.raises(ViewBudgetError, match="over this server's limit 90000"):
+        pipeline.admit(over)
+    assert pipeline.view_config(over).max_pixels == 90_000  # a stored record: planned at the limit
+    data, _ = _person_frame(server, (1.5, 0.8))
+    rgb = cv2.cvtColor(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+    runner = ModelRunner(model, view=view)
+    layouts = [mapping_layout(o.mapping) for o in runner.outputs([rgb, rgb], [server, own])]
+    assert layouts == ["1band+nadir", "2band+nadir"]
+    found = [len(pipeline.detect(data, camera).detections.scores) for camera in (server, own)]
+    assert found == [1, 1]
 
 
 @pytest.mark.parametrize(("camera_change", "max_pixels", "reason"), [

@@ -77,6 +77,13 @@ def test_a_budget_that_binds_shrinks_the_view_and_says_so() -> None:
     assert plan.pixels <= 300_000
     assert plan.bands[0].scale < 1.0
     assert any("binds" in note for note in plan.notes)
+    # ... and what the unbound view would take: a budget of that much plans it whole
+    whole = plan_view(DEMO, config=LARGE)
+    assert plan.wanted_pixels == whole.wanted_pixels == whole.pixels > 1_900_000
+    assert plan_view(DEMO, config=ViewPlanConfig(max_pixels=whole.wanted_pixels)).pixels == whole.pixels
+    short = plan_view(DEMO, config=ViewPlanConfig(max_pixels=whole.wanted_pixels - 1))
+    assert short.layout == "2band" and any("no nadir view" in note for note in short.notes)  # it goes first
+    assert plan.public()["wanted_pixels"] == whole.wanted_pixels
 
 
 def test_narrowing_keeps_the_rim_band_at_its_scale_within_a_budget() -> None:

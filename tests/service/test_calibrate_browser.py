@@ -131,6 +131,7 @@ def test_calibrating_a_rendered_frame_by_clicking_its_marks(
     wait_for(lambda: cal_state(driver)["saves"] == 1, "the save")
     saved = registry_camera(server)
     assert saved["site_pose"] == GUESS["site_pose"]  # where the camera stands is not the lens's business
+    assert saved["max_view_pixels"] == GUESS["max_view_pixels"]  # nor its own view budget
     camera = load_camera(saved)
     assert floor_error_at_m(camera, 8.0) < 0.02
     assert floor_error_at_m(camera, 5.0) < 0.01

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from fastapi import APIRouter, Path, Request, Response, status
@@ -11,9 +12,10 @@ from fisheye import CalibrationError, FisheyeCamera, camera_from_dict, camera_to
 from fisheye.camera import CAMERA_ID_PATTERN
 from fisheye.view_plan import ViewPlan, ViewPlanError
 from service.core.errors import ApiError
-from service.http.dependencies import ServiceState, State, WriteAccess
+from service.http.dependencies import State, WriteAccess
 from service.http.request_body import BodyLimits, read_json_object
 from service.http.schemas import CameraList, CameraView, error_responses
+from service.pipeline import ViewBudgetError
 
 router = APIRouter(tags=["cameras"])
 
@@ -44,28 +46,44 @@ async def list_cameras(state: State) -> dict[str, list[dict[str, Any]]]:
 @router.get("/v1/cameras/{camera_id}", response_model=CameraView, response_model_exclude_none=True,
             responses=error_responses(404, 422), summary="One camera's calibration record",
             description="With a planned model, `view` is the view planned for the camera's frames: the "
-                        "model input (`input_wh`, `pixels`, `cost_ratio` against the trained strip), its "
+                        "model input (`input_wh`, `pixels`, `cost_ratio` against the trained strip; "
+                        "`wanted_pixels`: what the view the camera's people ask for takes before any "
+                        "budget), its "
                         "bands, the smallest person in input px and where, its nadir view (`nadir`: the disc "
                         "below the lens as a second, upright input; null where the budget leaves no room), "
-                        "notes (a budget that binds), its `layout` and the `operating_point` its frames "
-                        "run at (the model's own for that layout where it has one).")
+                        "notes (a budget that binds), its `layout`, the `budget` it was planned within "
+                        "(`source`: the server's `--max-view-pixels`, or the camera record's own "
+                        "`max_view_pixels`) and the `operating_point` its frames run at (the model's own "
+                        "for that layout where it has one).")
 async def get_camera(state: State, camera_id: str = CameraId) -> dict[str, Any]:
     camera = await run_in_threadpool(state.registry.get, camera_id)
     if camera is None:
         raise not_found(camera_id)
     record = camera_to_dict(camera)
-    plan = await run_in_threadpool(_plan_or_refuse, state, camera)
+    pipeline = state.runner.pipeline
+    plan = await run_in_threadpool(_plan_or_refuse, pipeline.plan, camera)
     if plan is not None:
-        point = state.runner.pipeline.point(plan.layout)
-        record["view"] = {**plan.public(),
+        point = pipeline.point(plan.layout)
+        budget = pipeline.view_config(camera).max_pixels
+        notes = list(plan.notes)
+        if camera.max_view_pixels is not None and camera.max_view_pixels > budget:
+            notes.insert(0, f"the camera's max_view_pixels {camera.max_view_pixels} is over this server's "
+                            f"limit: planned at {budget} px")
+        record["view"] = {**plan.public(), "notes": notes,
+                          "budget": {"max_pixels": budget,
+                                     "source": "server" if camera.max_view_pixels is None else "camera"},
                           "operating_point": {"min_score": point.min_score, "nms_iou": point.nms_iou}}
     return record
 
 
-def _plan_or_refuse(state: ServiceState, camera: FisheyeCamera) -> ViewPlan | None:
-    """The view planned for `camera` (None for a model of a fixed view); 422 when none can be made."""
+def _plan_or_refuse(plan: Callable[[FisheyeCamera], ViewPlan | None], camera: FisheyeCamera
+                    ) -> ViewPlan | None:
+    """`plan(camera)`: the view planned for `camera` (None for a model of a fixed view); 422 when
+    its record asks for a budget over the server's limit or no view can be made."""
     try:
-        return state.runner.pipeline.plan(camera)
+        return plan(camera)
+    except ViewBudgetError as error:
+        raise ApiError(422, "view_budget_over_limit", f"camera {camera.id}: {error}") from None
     except ViewPlanError as error:
         raise ApiError(422, "view_unplannable", f"camera {camera.id}: {error}") from None
 
@@ -76,7 +94,9 @@ def _plan_or_refuse(state: ServiceState, camera: FisheyeCamera) -> ViewPlan | No
                                            **error_responses(400, 401, 413, 422)},
     summary="Create or replace a camera (the next frame uses it)",
     description="Body: the camera-file record of DESIGN.md as JSON; `id` may be left out and must "
-                "match the path when given. Answers 201 when the camera is new, 200 when replaced.",
+                "match the path when given; `max_view_pixels` gives the camera its own view budget, at "
+                "most the server's `--max-camera-view-pixels` (422 `view_budget_over_limit` above it). "
+                "Answers 201 when the camera is new, 200 when replaced.",
     openapi_extra={"requestBody": {"required": True, "content": {
         "application/json": {"schema": _record_schema()}}}},
 )
@@ -89,7 +109,8 @@ async def put_camera(request: Request, response: Response, state: State,
         candidate = camera_from_dict({**record, "id": record.get("id", camera_id)})
     except CalibrationError as error:
         raise ApiError(422, "invalid_camera", str(error)) from None
-    await run_in_threadpool(_plan_or_refuse, state, candidate)  # nothing is saved for an unplannable view
+    # nothing is saved for a view that cannot be planned or a budget over the limit
+    await run_in_threadpool(_plan_or_refuse, state.runner.pipeline.admit, candidate)
     try:
         outcome = await run_in_threadpool(state.registry.put_record, camera_id, record)
     except CalibrationError as error:

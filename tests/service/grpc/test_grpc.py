@@ -277,6 +277,17 @@ def test_registry_calls_and_token(server: LiveServer, demo_camera: FisheyeCamera
                 await stub.PutCamera(pb.PutCameraRequest(camera=bad), metadata=auth)
             except grpc.aio.AioRpcError as error:
                 out["invalid"] = error.code()
+            own = pb.Camera()
+            own.CopyFrom(camera)
+            own.max_view_pixels = 2_000_000  # the camera's own view budget, within the server's limit
+            out["own"] = await stub.PutCamera(pb.PutCameraRequest(camera=own), metadata=auth)
+            out["own_read"] = await stub.GetCamera(pb.GetCameraRequest(camera_id="grpc-cam"))
+            own.max_view_pixels = 4_000_001  # over the default limit: refused, nothing written
+            try:
+                await stub.PutCamera(pb.PutCameraRequest(camera=own), metadata=auth)
+            except grpc.aio.AioRpcError as error:
+                out["over"] = (error.code(), error.details())
+            out["after_over"] = await stub.GetCamera(pb.GetCameraRequest(camera_id="grpc-cam"))
             out["list"] = await stub.ListCameras(pb.ListCamerasRequest())
             out["demo"] = await stub.GetCamera(pb.GetCameraRequest(camera_id="demo"))
             await stub.DeleteCamera(pb.DeleteCameraRequest(camera_id="grpc-cam"), metadata=auth)
@@ -291,6 +302,10 @@ def test_registry_calls_and_token(server: LiveServer, demo_camera: FisheyeCamera
     assert out["no_token"] == grpc.StatusCode.UNAUTHENTICATED
     assert out["put"].created and not out["again"].created and out["put"].camera == camera
     assert out["invalid"] == grpc.StatusCode.INVALID_ARGUMENT
+    assert out["own"].camera.max_view_pixels == out["own_read"].max_view_pixels == 2_000_000
+    assert not out["put"].camera.HasField("max_view_pixels")
+    assert out["over"][0] == grpc.StatusCode.INVALID_ARGUMENT and "view_budget_over_limit" in out["over"][1]
+    assert out["after_over"].max_view_pixels == 2_000_000
     assert "grpc-cam" in [c.id for c in out["list"].cameras]
     demo = out["demo"]
     assert (demo.altitude_m, list(demo.kb)) == (demo_camera.altitude_m, demo_camera.kb)

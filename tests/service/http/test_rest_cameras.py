@@ -153,3 +153,50 @@ def test_a_camera_whose_view_cannot_be_planned_is_refused(settings_for: Callable
     with LiveServer(settings_for(model=DEFAULT_MODEL_PATH, max_view_pixels=4096)) as live:
         response = httpx.get(f"{live.url}/v1/cameras/demo")
         assert response.status_code == 422 and "budget of 4096 px" in response.json()["error"]["message"]
+
+
+def test_a_camera_record_sets_its_own_view_budget(settings_for: Callable[..., Settings]) -> None:
+    # One camera may take the rim band (its record's max_view_pixels) while the others keep the
+    # server's budget; the server's limit bounds what a record may ask, now and after a restart.
+    with LiveServer(settings_for(model=DEFAULT_MODEL_PATH, max_camera_view_pixels=2_500_000)) as live:
+        url = f"{live.url}/v1/cameras"
+        record = httpx.get(f"{url}/demo").json()
+        assert record["view"]["budget"] == {"max_pixels": 900_000, "source": "server"}
+        assert record["view"]["layout"] == "1band+nadir"
+        del record["view"]
+        saved = httpx.put(f"{url}/demo", json={**record, "max_view_pixels": 2_400_000})
+        assert saved.status_code == 200 and saved.json()["max_view_pixels"] == 2_400_000
+        view = httpx.get(f"{url}/demo").json()["view"]
+        assert view["budget"] == {"max_pixels": 2_400_000, "source": "camera"}
+        assert view["layout"] == "2band+nadir" and [band["scale"] for band in view["bands"]] == [1.0, 1.5]
+        assert view["pixels"] <= 2_400_000
+        # ... at the operating point the model carries for that view
+        points = httpx.get(f"{live.url}/v1/model").json()["view_operating_points"]
+        assert view["operating_point"] == points["2band+nadir"]
+        # its frames run that view: more input pixels than the same frame through the server's budget
+        sample = (SAMPLES / "000001.jpg").read_bytes()
+        jpeg = {"Content-Type": "image/jpeg"}
+        own = httpx.post(f"{url}/demo/detect", content=sample, headers=jpeg, timeout=60)
+        assert httpx.put(f"{url}/twin", json={**record, "id": "twin"}).status_code == 201
+        twin_view = httpx.get(f"{url}/twin").json()["view"]
+        assert twin_view["layout"] == "1band+nadir" and twin_view["budget"]["source"] == "server"
+        assert twin_view["wanted_pixels"] == view["wanted_pixels"] == view["pixels"]  # the budget to ask for
+        server = httpx.post(f"{url}/twin/detect", content=sample, headers=jpeg, timeout=60)
+        assert own.status_code == server.status_code == 200
+        assert own.json()["detections"] and server.json()["detections"]
+        assert own.json()["detections"] != server.json()["detections"]
+        # over the limit, or below the smallest budget: refused, nothing written
+        over = httpx.put(f"{url}/demo", json={**record, "max_view_pixels": 2_500_001})
+        assert over.status_code == 422 and over.json()["error"]["code"] == "view_budget_over_limit"
+        assert "2500000" in over.json()["error"]["message"]
+        tiny = httpx.put(f"{url}/demo", json={**record, "max_view_pixels": 100})
+        assert tiny.status_code == 422 and tiny.json()["error"]["code"] == "invalid_camera"
+        assert httpx.get(f"{url}/demo").json()["max_view_pixels"] == 2_400_000
+        # a record read back (view and all) is written back as it is
+        again = httpx.get(f"{url}/demo").json()
+        assert httpx.put(f"{url}/demo", json=again).json()["max_view_pixels"] == 2_400_000
+    # the limit lowered since: the stored record is planned at the limit, and says so
+    with LiveServer(settings_for(model=DEFAULT_MODEL_PATH, max_camera_view_pixels=1_000_000)) as live:
+        view = httpx.get(f"{live.url}/v1/cameras/demo").json()["view"]
+        assert view["budget"] == {"max_pixels": 1_000_000, "source": "camera"}
+        assert view["layout"] == "1band+nadir" and "over this server's limit" in view["notes"][0]
