@@ -66,7 +66,7 @@ def evaluate_design(model: OnnxModel, view: ViewPlanConfig, frames: Sequence[Any
     return {**{k: metrics.get(k) for k in FIGURES}, "cost_ratio": sum(costs) / len(costs)}
 
 
-def _cell(value: Any) -> str:
+def cell(value: Any) -> str:
     return "–" if value is None or value != value else f"{value:.3f}"
 
 
@@ -77,10 +77,10 @@ def markdown_table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
     header = ["design", *[f"{s} AP50 / P" for s in sets], "renders AP_far / recall_nadir / mPE", "cost"]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for design, by_set in results.items():
-        cells = [design, *[f"{_cell(by_set[s]['AP50'])} / {_cell(by_set[s]['precision'])}" for s in sets]]
+        cells = [design, *[f"{cell(by_set[s]['AP50'])} / {cell(by_set[s]['precision'])}" for s in sets]]
         rendered = [s for s in sets if by_set[s].get("mPE") is not None]
         extra = by_set[rendered[-1]] if rendered else {}
-        cells.append(" / ".join(_cell(extra.get(k)) for k in ("AP_far", "recall_nadir", "mPE")))
+        cells.append(" / ".join(cell(extra.get(k)) for k in ("AP_far", "recall_nadir", "mPE")))
         cells.append(f"{by_set[sets[0]]['cost_ratio']:.2f}x")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
