@@ -51,6 +51,7 @@ from viewer_browser import chromium_driver, save_screenshot, wait_for
 
 from fisheye import camera_from_dict, camera_to_dict, load_camera
 from fisheye.ruler_marks import marks_to_csv, parse_marks_csv, simulate_ruler_marks
+from models import DEFAULT_MODEL_PATH
 from service.cli import main
 
 
@@ -465,3 +466,37 @@ def test_a_camera_not_in_the_registry_is_made_by_the_calibration(
     assert saved["id"] == "new-cam" and "site_pose" not in saved
     assert floor_error_at_m(load_camera(saved), 8.0) < 0.01
     assert "new-cam" in [camera["id"] for camera in httpx.get(f"{server.url}/v1/cameras").json()["cameras"]]
+
+
+def test_the_page_sets_a_camera_view_budget(driver: Any, settings_for: Any) -> None:
+    # With a planned model the page shows the camera's view and the budget it was planned within;
+    # the budget typed in is saved with the camera, and emptied, the server's applies again.
+    from selenium.webdriver.common.by import By
+
+    def shown() -> str:
+        return str(driver.execute_script("return document.getElementById('cal-view').textContent"))
+
+    with LiveServer(settings_for(model=DEFAULT_MODEL_PATH)) as live:
+        assert httpx.put(f"{live.url}/v1/cameras/tape", json=GUESS).status_code == 201
+        open_calibrate(driver, live.url, "tape")
+        wait_for(lambda: "view: 2band, " in shown(), "the camera's view")  # 2 M px: no nadir view
+        assert "of this camera's 2,000,000; its people ask for 2,052,096 px" in shown()
+        assert driver.execute_script("return document.getElementById('cal-view-pixels').value") == "2000000"
+        type_into(driver, "cal-view-pixels", "12.5")
+        driver.find_element(By.ID, "cal-save").click()
+        wait_for(lambda: "whole number of px" in cal_state(driver)["status"], "the refusal")
+        assert cal_state(driver)["saves"] == 0
+        type_into(driver, "cal-view-pixels", "")
+        driver.find_element(By.ID, "cal-save").click()
+        wait_for(lambda: cal_state(driver)["saves"] == 1, "the save")
+        wait_for(lambda: "1band+nadir" in shown(), "the server's view")
+        assert "the server's 900,000; its people ask for" in shown()
+        saved = httpx.get(f"{live.url}/v1/cameras/tape").json()
+        assert "max_view_pixels" not in saved and saved["view"]["budget"]["source"] == "server"
+        type_into(driver, "cal-view-pixels", "3000000")
+        driver.find_element(By.ID, "cal-save").click()
+        wait_for(lambda: cal_state(driver)["saves"] == 2, "the second save")
+        wait_for(lambda: shown() == "view: 2band+nadir, 2,052,096 px of this camera's 3,000,000",
+                 "the camera's whole view")
+        assert httpx.get(f"{live.url}/v1/cameras/tape").json()["max_view_pixels"] == 3_000_000
+        assert page_errors(driver) == []

@@ -14,7 +14,7 @@
 // resolution of the same aspect ratio).
 
 import { api } from "./api.js";
-import { cameraRecord, marksCsvAt, marksFromCsv } from "./calibrate_io.js";
+import { cameraRecord, describeView, marksCsvAt, marksFromCsv, withViewBudget } from "./calibrate_io.js";
 import { calibrateOverlay } from "./calibrate_overlay.js";
 import { renderPanel } from "./calibrate_panel.js";
 import { fmt, html, svg } from "./dom.js";
@@ -383,14 +383,29 @@ async function save() {
   if (cal.fitting || cal.fitsDone < cal.fitsWanted) throw new Error("the fit is not finished yet");
   const lensWh = (cal.fit?.camera ?? cal.camera)?.image_size;
   if (cal.frame && lensWh && scalableTo(lensWh) instanceof Error) throw scalableTo(lensWh); // masks could not follow
-  const record = cameraRecord({ cameraId: cal.cameraId, saved: cal.camera, start: cal.start, marks: cal.marks, fit: cal.fit,
-                                fitError: cal.fitError, masks: cal.frame ? cal.masks : null, frameWh: cal.frame ? frameWh() : null });
+  const record = withViewBudget(
+    cameraRecord({ cameraId: cal.cameraId, saved: cal.camera, start: cal.start, marks: cal.marks, fit: cal.fit,
+                   fitError: cal.fitError, masks: cal.frame ? cal.masks : null, frameWh: cal.frame ? frameWh() : null }),
+    $("cal-view-pixels").value);
   const saved = await api.putCamera(cal.cameraId, record, $("cal-token").value.trim());
   cal.camera = saved;
   cal.unsaved = false;
   cal.saves += 1;
   report(`saved camera ${saved.id}; the Check tool now uses it`);
   render();
+  await showView();
+}
+
+/** The service's plan of the camera's view (a planned model), and the budget it was planned within. */
+async function showView() {
+  const shown = cal.cameraId;
+  let text = "";
+  try {
+    text = describeView((await api.camera(shown)).view);
+  } catch {
+    // not in the registry yet
+  }
+  if (cal.cameraId === shown) $("cal-view").textContent = text;
 }
 
 // ----- wiring
@@ -465,6 +480,10 @@ function wire() {
   }));
   $("cal-export").addEventListener("click", guarded(download));
   $("cal-save").addEventListener("click", guarded(save));
+  $("cal-view-pixels").addEventListener("change", () => {
+    cal.unsaved = true;
+    render();
+  });
   document.addEventListener("keydown", guarded((event) => {
     if ($("calibrate-view").hidden || ["INPUT", "SELECT", "TEXTAREA"].includes(event.target.tagName)) return;
     if (event.key === "Enter" && cal.drawing.length) return closeMask();
@@ -496,8 +515,11 @@ export async function openCalibrate(cameraId, cameras, setStatus) {
     $("cal-width").value = camera ? String(camera.image_size[0]) : "";
     $("cal-height").value = camera ? String(camera.image_size[1]) : "";
     $("cal-fit-tilt").checked = Boolean(camera?.tilt_deg?.some((a) => a !== 0));
+    $("cal-view-pixels").value = camera?.max_view_pixels ? String(camera.max_view_pixels) : "";
+    $("cal-view").textContent = "";
     $("cal-frame").replaceChildren();
     render();
+    await showView();
     if (!camera) setStatus(`camera ${cameraId} is not in the registry yet: the fit makes a new one`);
     try {
       await loadLatest();

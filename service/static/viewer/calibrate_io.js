@@ -36,3 +36,22 @@ export function cameraRecord({ cameraId, saved, start = null, marks, fit, fitErr
   const masksPx = masks === null ? (saved?.masks_px ?? []) : masks.map((points) => rescalePoints(points, frameWh, lens.image_size));
   return { ...lens, ...place, id: cameraId, masks_px: masksPx };
 }
+
+/** `record` with the view budget typed in the page (`text`: px, or empty for the server's). */
+export function withViewBudget(record, text) {
+  const { max_view_pixels: _, ...rest } = record;
+  if (String(text).trim() === "") return rest;
+  const pixels = Number(text);
+  if (!Number.isInteger(pixels) || pixels < 4096) throw new Error(`the view budget must be a whole number of px, at least 4096 (or empty): got ${text}`);
+  return { ...rest, max_view_pixels: pixels };
+}
+
+/** One line of a camera's planned view (`GET /v1/cameras/{id}`'s `view`; "" for a fixed view). */
+export function describeView(view) {
+  if (!view) return "";
+  const px = (n) => n.toLocaleString("en-US");
+  const whose = view.budget?.source === "camera" ? "this camera's" : "the server's";
+  const budget = view.budget ? ` of ${whose} ${px(view.budget.max_pixels)}` : "";
+  const wanted = view.wanted_pixels > view.pixels ? `; its people ask for ${px(view.wanted_pixels)} px` : "";
+  return `view: ${view.layout}, ${px(view.pixels)} px${budget}${wanted}`;
+}
