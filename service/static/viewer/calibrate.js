@@ -396,15 +396,11 @@ async function save() {
   await showView();
 }
 
-/** The service's plan of the camera's view (a planned model), and the budget it was planned within. */
+/** The service's plan of the camera's view (a planned model), and the budget it was planned within;
+ * nothing for a camera not in the registry yet. */
 async function showView() {
   const shown = cal.cameraId;
-  let text = "";
-  try {
-    text = describeView((await api.camera(shown)).view);
-  } catch {
-    // not in the registry yet
-  }
+  const text = cal.camera ? describeView((await api.camera(shown)).view) : "";
   if (cal.cameraId === shown) $("cal-view").textContent = text;
 }
 
@@ -519,7 +515,7 @@ export async function openCalibrate(cameraId, cameras, setStatus) {
     $("cal-view").textContent = "";
     $("cal-frame").replaceChildren();
     render();
-    await showView();
+    await showView().catch((error) => report(`the camera's view: ${error.message}`, true));
     if (!camera) setStatus(`camera ${cameraId} is not in the registry yet: the fit makes a new one`);
     try {
       await loadLatest();
