@@ -47,7 +47,7 @@ from contract import (
     RawOutputs,
     SessionThreads,
 )
-from contract.detect import FrameOutputs, fused_feet, nadir_feet, select_detections
+from contract.detect import FrameOutputs, frame_candidates, select_detections
 from contract.views import DEFAULT_VIEW, PlannedInput, mapping_layout
 from fisheye.rotated import rotated_iou
 
@@ -95,27 +95,12 @@ def soft_selector(kind: str, parameter: float) -> Selector:
     feet fused as the service fuses them, at most 300."""
 
     def select(out: FrameOutputs) -> FrameDetections:
-        raw, mapping, pp = out.raw, out.mapping, out.principal_point
-        boxes, scores = raw.boxes.astype(np.float64), raw.scores.astype(np.float64)
-        valid = np.isfinite(scores) & np.all(np.isfinite(boxes), axis=1)
-        feet = None if raw.foot is None else raw.foot.astype(np.float64)
-        if feet is not None:
-            valid &= np.all(np.isfinite(feet), axis=1)
-        valid[valid] = mapping.usable(boxes[valid])
-        keep = valid & (scores >= FLOOR)
-        order = mapping.presuppress(boxes[keep], scores[keep], PRE_NMS_IOU)
-        kept_boxes, kept_scores = boxes[keep][order], scores[keep][order]
-        frame_boxes = mapping.boxes_to_frame(kept_boxes)
-        foot = None
-        if feet is not None:
-            fused = fused_feet(mapping, kept_boxes, kept_scores, feet[keep][order], boxes[valid],
-                               scores[valid], feet[valid])
-            foot = mapping.points_to_frame(fused)
-            side = mapping.box_side_feet(kept_boxes)
-            foot[side] = nadir_feet(frame_boxes[side], pp)
-        chosen, decayed = soft_nms(frame_boxes, kept_scores, pp, kind, parameter, FLOOR)
+        found = frame_candidates(out.raw, out.mapping, out.principal_point, FLOOR, PRE_NMS_IOU)
+        pp = out.principal_point
+        chosen, decayed = soft_nms(found.boxes_cxcywh, found.scores, pp, kind, parameter, FLOOR)
         chosen, decayed = chosen[:300], decayed[:300]
-        return FrameDetections(frame_boxes[chosen], decayed, pp, None if foot is None else foot[chosen])
+        return FrameDetections(found.boxes_cxcywh[chosen], decayed, pp,
+                               None if found.foot_px is None else found.foot_px[chosen])
 
     return select
 
@@ -124,11 +109,7 @@ def part_of(raw: RawOutputs, mapping: InputMapping) -> NDArray[np.int64]:
     """(N,) each output's part of its view: 0 the nadir view, 1 + k band k (a fixed view: all 1)."""
     if not isinstance(mapping, PlannedInput):
         return np.ones(len(raw.scores), dtype=np.int64)
-    boxes = raw.boxes.astype(np.float64)
-    band_of_piece = np.asarray([k for k, band in enumerate(mapping.plan.bands) for _ in range(band.pieces)])
-    part = band_of_piece[mapping._piece_of((boxes[:, 1] + boxes[:, 3]) / 2)] + 1
-    part[mapping._in_nadir((boxes[:, 0] + boxes[:, 2]) / 2)] = 0
-    return np.asarray(part, dtype=np.int64)
+    return mapping.parts(raw.boxes)
 
 
 def rescaled(scores: NDArray[np.floating], own: FloatArray, threshold: float) -> FloatArray:

@@ -56,14 +56,22 @@ class FrameDetections:
                              f"{None if self.foot_px is None else self.foot_px.shape} disagree")
 
 
-def select_detections(raw: RawOutputs, mapping: InputMapping, principal_point: tuple[float, float],
-                      min_score: float, nms_iou: float | None = 0.6, max_detections: int = 300
-                      ) -> FrameDetections:
-    """One image's RawOutputs -> FrameDetections with score ≥ `min_score`, in frame px.
+@dataclass(frozen=True)
+class Candidates:
+    """A frame's candidates before the rotated NMS: boxes (N, 4) radius-aligned `cxcywh` frame px,
+    scores (N,) and foot points (N, 2) frame px or None, after the view's cheap NMS in input px."""
 
-    With NMS (`nms_iou` not None), each kept detection's foot point is the score-weighted median of
-    those of its cluster (`fused_feet`); without, every output is passed through as it is. People
-    of the nadir view stand where their box puts them (`nadir_feet`)."""
+    boxes_cxcywh: FloatArray
+    scores: FloatArray
+    foot_px: FloatArray | None
+
+
+def frame_candidates(raw: RawOutputs, mapping: InputMapping, principal_point: tuple[float, float],
+                     min_score: float, presuppress_iou: float | None) -> Candidates:
+    """One image's RawOutputs -> its candidates in frame px: score ≥ `min_score`, finite and usable
+    boxes, the view's NMS in input px at `presuppress_iou` (None: none), each foot point the
+    score-weighted median of its cluster's (`fused_feet`; with a presuppression only), people of the
+    nadir view standing where their box puts them (`nadir_feet`)."""
     boxes = raw.boxes.astype(np.float64)
     scores = raw.scores.astype(np.float64)
     valid = np.isfinite(scores) & np.all(np.isfinite(boxes), axis=1)
@@ -72,13 +80,13 @@ def select_detections(raw: RawOutputs, mapping: InputMapping, principal_point: t
     if feet is not None:
         valid &= np.all(np.isfinite(feet), axis=1)
     keep = valid & (scores >= min_score)
-    order = (mapping.presuppress(boxes[keep], scores[keep], nms_iou) if nms_iou is not None
+    order = (mapping.presuppress(boxes[keep], scores[keep], presuppress_iou) if presuppress_iou is not None
              else np.arange(int(keep.sum())))
     kept_boxes, kept_scores = boxes[keep][order], scores[keep][order]
     foot = None
     if feet is not None:
         kept_feet = feet[keep][order]
-        if nms_iou is not None:
+        if presuppress_iou is not None:
             kept_feet = fused_feet(mapping, kept_boxes, kept_scores, kept_feet,
                                    boxes[valid], scores[valid], feet[valid])
         foot = mapping.points_to_frame(kept_feet)
@@ -86,12 +94,24 @@ def select_detections(raw: RawOutputs, mapping: InputMapping, principal_point: t
     if foot is not None:
         side = mapping.box_side_feet(kept_boxes)
         foot[side] = nadir_feet(boxes_frame[side], principal_point)
-    if nms_iou is not None and len(kept_scores) > 1:
-        kept = rotated_nms(boxes_frame, kept_scores, principal_point, nms_iou)[:max_detections]
+    return Candidates(boxes_frame, kept_scores, foot)
+
+
+def select_detections(raw: RawOutputs, mapping: InputMapping, principal_point: tuple[float, float],
+                      min_score: float, nms_iou: float | None = 0.6, max_detections: int = 300
+                      ) -> FrameDetections:
+    """One image's RawOutputs -> FrameDetections with score ≥ `min_score`, in frame px.
+
+    With NMS (`nms_iou` not None), each kept detection's foot point is the score-weighted median of
+    those of its cluster (`fused_feet`); without, every output is passed through as it is. People
+    of the nadir view stand where their box puts them (`nadir_feet`)."""
+    found = frame_candidates(raw, mapping, principal_point, min_score, nms_iou)
+    if nms_iou is not None and len(found.scores) > 1:
+        kept = rotated_nms(found.boxes_cxcywh, found.scores, principal_point, nms_iou)[:max_detections]
     else:
-        kept = np.arange(min(len(kept_scores), max_detections))
-    return FrameDetections(boxes_frame[kept], kept_scores[kept], principal_point,
-                           None if foot is None else foot[kept])
+        kept = np.arange(min(len(found.scores), max_detections))
+    return FrameDetections(found.boxes_cxcywh[kept], found.scores[kept], principal_point,
+                           None if found.foot_px is None else found.foot_px[kept])
 
 
 FOOT_FUSION_IOU = 0.65  # a candidate votes on a kept detection's foot from this IoU (input px) on

@@ -275,6 +275,15 @@ class PlannedInput:
         return np.clip(np.searchsorted(starts, np.asarray(rows, dtype=np.float64) + 0.5, side="right") - 1,
                        0, len(starts) - 1).astype(np.int64)
 
+    def parts(self, boxes: NDArray[np.floating]) -> NDArray[np.int64]:
+        """(N,) the part of the view each of (N, 4) canvas boxes belongs to: 0 the nadir view,
+        1 + k band k (by its centre, as the mapping reads it)."""
+        xyxy = np.asarray(boxes, dtype=np.float64)
+        band_of_piece = np.asarray([k for k, band in enumerate(self.plan.bands) for _ in range(band.pieces)])
+        part = band_of_piece[self._piece_of((xyxy[:, 1] + xyxy[:, 3]) / 2)] + 1
+        part[self._in_nadir((xyxy[:, 0] + xyxy[:, 2]) / 2)] = 0
+        return np.asarray(part, dtype=np.int64)
+
     def _each_piece(self, values: NDArray[np.floating], rows: NDArray[np.floating], row_columns: list[int],
                     convert: Callable[[PolarGrid, FloatArray], FloatArray], width: int) -> FloatArray:
         """(N, C) canvas values, each mapped by `convert` through the piece that holds its `rows`

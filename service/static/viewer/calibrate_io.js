@@ -30,9 +30,7 @@ export function cameraRecord({ cameraId, saved, start = null, marks, fit, fitErr
   }
   const lens = fit ? fit.camera : (saved ?? start);
   if (!lens) throw new Error(`camera ${cameraId} is not in the registry and has no fit: click marks, or fit the image circle`);
-  // what the record says beyond the lens (where the camera stands, its own view budget) survives a new fit
-  const place = Object.fromEntries(["site", "site_pose", "max_view_pixels"].filter((k) => saved?.[k] != null)
-    .map((k) => [k, saved[k]]));
+  const place = Object.fromEntries(["site", "site_pose"].filter((k) => saved?.[k] != null).map((k) => [k, saved[k]]));
   const masksPx = masks === null ? (saved?.masks_px ?? []) : masks.map((points) => rescalePoints(points, frameWh, lens.image_size));
   return { ...lens, ...place, id: cameraId, masks_px: masksPx };
 }
