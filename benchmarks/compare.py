@@ -7,12 +7,13 @@
         --data r1024=data/unseen1024/annotations.json --frames data/unseen2952 --json compare.json
 
 Each model (a FishLoc ONNX file or training checkpoint) or zero-shot baseline (`rotations:ONNX`,
-`letterbox:ONNX`, `detector.baselines`) is evaluated on every data set exactly as `fishloc eval`
-does, then timed on the frames of `--frames` (encoded JPEGs of one size, as a camera sends them):
-*inference* is the model alone on its own input (p50), *end to end* the whole path from the JPEG
-bytes to floor positions (`service.pipeline.Pipeline.detect` for ONNX models, decode + predictor
-for the baselines; p50 and p95), interleaved model by model so that the machine's load hits them
-alike. Times are this machine's: compare rows of one run.
+`letterbox:ONNX`, `tiled:ONNX`: any COCO file of `../shared/pretrained/`, `detector.baselines`)
+is evaluated on every data set exactly as `fishloc eval` does, then timed on the frames of
+`--frames` (encoded JPEGs of one size, as a camera sends them): *inference* is the model alone on
+its own input (p50), *end to end* the whole path from the JPEG bytes to floor positions
+(`service.pipeline.Pipeline.detect` for ONNX models, decode + predictor for the baselines, decode +
+view + windows + selection for `tiled:`; p50 and p95), interleaved model by model so that the
+machine's load hits them alike. Times are this machine's: compare rows of one run.
 """
 
 from __future__ import annotations
@@ -42,13 +43,15 @@ from contract import (
     run_view,
     view_inputs,
 )
+from contract.detect import FrameOutputs
+from contract.metadata import OperatingPoint
 from contract.views import DEFAULT_VIEW
-from detector.baselines import LetterboxPredictor, RotatedCropsPredictor
+from detector.baselines import LetterboxPredictor, RotatedCropsPredictor, TiledCocoModel
 from detector.data.readers import read_dataset
 from detector.evaluate import Predictor, RunnerPredictor, evaluate, json_safe, load_predictor
 from fisheye import FisheyeCamera, load_camera
 from fisheye.view_plan import ViewPlanConfig
-from models import DEMO_CAMERA_PATH
+from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
 from service.frame_decode import decode_frame, read_header
 from service.pipeline import Pipeline, PipelineConfig
 
@@ -97,6 +100,41 @@ def _onnx_entry(name: str, path: str, threads: int, view: ViewPlanConfig = DEFAU
                  lambda data, camera: _timed(lambda: pipeline.detect(data, camera)), inference_ms)
 
 
+def _tiled_entry(name: str, spec: str, threads: int) -> Entry:
+    """A COCO file read in windows on the default model's planned views (`TiledCocoModel`):
+    `FILE[@PIXELS][,min_score=S][,nms_iou=I][,FIELD=VALUE...]`. End to end is the frame's decode
+    (reduced as the service decodes), its view, the windows and the selection: the service's path
+    without the floor positions the model has no foot output for."""
+    file, _, view_text = spec.partition("@")
+    fields = view_text.split(",") if view_text else []
+    point = {k: float(v) for k, _, v in (f.partition("=") for f in fields) if k in ("min_score", "nms_iou")}
+    rest = [f for f in fields if f.partition("=")[0] not in point]
+    view = view_from_spec(",".join(rest)) if rest else DEFAULT_VIEW
+    model = TiledCocoModel.like(file, DEFAULT_MODEL_PATH, threads,
+                                OperatingPoint(point.get("min_score", 0.3), point.get("nms_iou", 0.5)))
+    runner = ModelRunner(model, view=view)
+
+    def model_inputs(data: bytes, camera: FisheyeCamera) -> tuple[list[np.ndarray], InputMapping]:
+        frame_camera = camera.scaled_to(read_header(data).size_wh)
+        frame = decode_frame(data, min_decoded_side(model.info, frame_camera, view), 40_000_000)
+        return view_inputs(model.info, frame.rgb, frame_camera, view)
+
+    def frame_ms(data: bytes, camera: FisheyeCamera) -> float:
+        frame_camera = camera.scaled_to(read_header(data).size_wh)
+
+        def run() -> None:
+            images, mapping = model_inputs(data, camera)
+            runner.select([FrameOutputs(run_view(model, images, mapping), mapping,
+                                        frame_camera.principal_point)], model.info.default_min_score)
+        return _timed(run)
+
+    def inference_ms(data: bytes, camera: FisheyeCamera) -> float:
+        images, mapping = model_inputs(data, camera)
+        return _timed(lambda: run_view(model, images, mapping))
+
+    return Entry(name, RunnerPredictor(runner), frame_ms, inference_ms)
+
+
 def _predictor_entry(name: str, predictor: Predictor) -> Entry:
     def frame_ms(data: bytes, camera: FisheyeCamera) -> float:
         def run() -> None:
@@ -130,6 +168,8 @@ def build_entry(name: str, spec: str, threads: int) -> Entry:
     serve --max-view-pixels`; `FILE@PIXELS,nadir_scale=1.25`: other fields of the plan too), a
     checkpoint, or `KIND:ONNX` for a zero-shot baseline."""
     kind, _, path = spec.partition(":")
+    if kind == "tiled" and path:
+        return _tiled_entry(name, path, threads)
     if kind in BASELINES and path:
         return _predictor_entry(name, BASELINES[kind](path, threads))
     file, _, view_text = spec.partition("@")
@@ -194,7 +234,9 @@ def main(argv: list[str] | None = None) -> int:
                              "runs a planned model in the views of that budget and plan, e.g. "
                              "model.onnx@1000000,nadir_scale=1.25")
     parser.add_argument("--baseline", action="append", default=[], metavar="NAME=KIND:ONNX",
-                        help="a zero-shot baseline: rotations:ONNX or letterbox:ONNX (repeat)")
+                        help="a zero-shot baseline (repeat): rotations:ONNX or letterbox:ONNX, or "
+                             "tiled:ONNX[@PIXELS][,min_score=S,nms_iou=I]: a COCO file read in windows "
+                             "on the default model's planned views")
     parser.add_argument("--data", action="append", default=[], metavar="NAME=ANNOTATIONS",
                         help="an evaluation set; names starting with 'real' get the real-frame columns")
     parser.add_argument("--frames", default=None, help="folder of encoded frames of one size to time")

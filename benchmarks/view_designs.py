@@ -52,6 +52,10 @@ DESIGNS: dict[str, ViewPlanConfig] = {
     # the nadir view) rather than one band; each at the two-band view's operating point
     **{f"rim band narrowed to fit {budget / 1e6:g}M + nadir view": dataclasses.replace(
         DEFAULT_VIEW, max_pixels=budget, min_outer_fraction=0.1) for budget in (1_400_000, 1_600_000)},
+    # after 0.7.2: a middle step between the default budget and the two bands' 2.0 M px, the rim
+    # band over the same radii at 1.25x where 1.5x does not fit (1.28-1.44 M px with the nadir view)
+    "rim band at 1.25x (scales 1 / 1.25 / 1.5), 1.5M + nadir view": dataclasses.replace(
+        DEFAULT_VIEW, scales=(1.0, 1.25, 1.5), max_pixels=1_500_000),
 }
 FIGURES = ("AP50", "precision", "recall", "AP_far", "recall_nadir", "mPE")
 

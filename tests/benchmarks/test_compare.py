@@ -42,3 +42,21 @@ def test_a_model_spec_names_the_budget_and_other_fields_of_the_plan() -> None:
     for bad in ("1000000,scales=2", "1000000,size=3", "many"):
         with pytest.raises(ValueError):
             view_from_spec(bad)
+
+
+def test_a_coco_file_read_in_windows_is_evaluated_and_timed_in_the_planned_view(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "compare.json"
+    coco = ROOT / "models" / "pretrained" / "yolox_nano.onnx"
+    assert main(["--baseline", f"tiled=tiled:{coco}",
+                 "--baseline", f"tiled 4M=tiled:{coco}@4000000,min_score=0.4,nms_iou=0.45",
+                 "--data", f"samples={ROOT / 'samples' / 'annotations.json'}",
+                 "--frames", str(ROOT / "samples"), "--runs", "1", "--warmup", "0",
+                 "--json", str(out)]) == 0
+    rows = json.loads(out.read_text())["rows"]
+    assert "| tiled 4M |" in capsys.readouterr().out
+    for name in ("tiled", "tiled 4M"):
+        assert 0.0 < rows[name]["metrics"]["samples"]["AP50"] <= 1.0
+        assert all(rows[name]["times"][k] > 0 for k in ("inference_p50_ms", "e2e_p50_ms"))
+    assert rows["tiled"]["metrics"]["samples"]["min_score"] == 0.3  # the spec's point, else 0.3
+    assert rows["tiled 4M"]["metrics"]["samples"]["min_score"] == 0.4
