@@ -43,7 +43,7 @@ from contract import (
     run_view,
     view_inputs,
 )
-from contract.detect import FrameOutputs
+from contract.detect import ContractModel, FrameOutputs
 from contract.metadata import OperatingPoint
 from contract.views import DEFAULT_VIEW
 from detector.baselines import LetterboxPredictor, RotatedCropsPredictor, TiledCocoModel
@@ -79,25 +79,35 @@ def _timed(call: Callable[[], object]) -> float:
     return (time.perf_counter() - start) * 1e3
 
 
+def _frame_inputs(model: ContractModel, view: ViewPlanConfig, data: bytes, camera: FisheyeCamera
+                  ) -> tuple[list[np.ndarray], InputMapping, FisheyeCamera]:
+    """The JPEG `data` of `camera` decoded as the service decodes it (reduced where the view
+    allows), the model's inputs, their mapping and the camera at the frame's size."""
+    frame_camera = camera.scaled_to(read_header(data).size_wh)
+    frame = decode_frame(data, min_decoded_side(model.info, frame_camera, view), 40_000_000)
+    return *view_inputs(model.info, frame.rgb, frame_camera, view), frame_camera
+
+
+def _inference_timer(model: ContractModel, view: ViewPlanConfig) -> Callable[[bytes, FisheyeCamera], float]:
+    """Times the model alone on a frame's inputs, made once per frame outside the timed call."""
+    inputs: dict[bytes, tuple[list[np.ndarray], InputMapping]] = {}
+
+    def inference_ms(data: bytes, camera: FisheyeCamera) -> float:
+        if data not in inputs:
+            inputs[data] = _frame_inputs(model, view, data, camera)[:2]
+        images, mapping = inputs[data]
+        return _timed(lambda: run_view(model, images, mapping))
+
+    return inference_ms
+
+
 def _onnx_entry(name: str, path: str, threads: int, view: ViewPlanConfig = DEFAULT_VIEW) -> Entry:
     model = OnnxModel(path, SessionThreads(intra_op=threads))
     pipeline = Pipeline(model, PipelineConfig(view=view))
     pipeline.warm_up()
-    inputs: dict[bytes, tuple[list[np.ndarray], InputMapping]] = {}
-
-    def model_inputs(data: bytes, camera: FisheyeCamera) -> tuple[list[np.ndarray], InputMapping]:
-        if data not in inputs:
-            frame_camera = camera.scaled_to(read_header(data).size_wh)
-            frame = decode_frame(data, min_decoded_side(model.info, frame_camera, view), 40_000_000)
-            inputs[data] = view_inputs(model.info, frame.rgb, frame_camera, view)
-        return inputs[data]
-
-    def inference_ms(data: bytes, camera: FisheyeCamera) -> float:
-        images, mapping = model_inputs(data, camera)  # made outside the timed call
-        return _timed(lambda: run_view(model, images, mapping))
-
     return Entry(name, RunnerPredictor(ModelRunner(model, view=view)),
-                 lambda data, camera: _timed(lambda: pipeline.detect(data, camera)), inference_ms)
+                 lambda data, camera: _timed(lambda: pipeline.detect(data, camera)),
+                 _inference_timer(model, view))
 
 
 def _tiled_entry(name: str, spec: str, threads: int) -> Entry:
@@ -114,25 +124,14 @@ def _tiled_entry(name: str, spec: str, threads: int) -> Entry:
                                 OperatingPoint(point.get("min_score", 0.3), point.get("nms_iou", 0.5)))
     runner = ModelRunner(model, view=view)
 
-    def model_inputs(data: bytes, camera: FisheyeCamera) -> tuple[list[np.ndarray], InputMapping]:
-        frame_camera = camera.scaled_to(read_header(data).size_wh)
-        frame = decode_frame(data, min_decoded_side(model.info, frame_camera, view), 40_000_000)
-        return view_inputs(model.info, frame.rgb, frame_camera, view)
-
     def frame_ms(data: bytes, camera: FisheyeCamera) -> float:
-        frame_camera = camera.scaled_to(read_header(data).size_wh)
-
         def run() -> None:
-            images, mapping = model_inputs(data, camera)
+            images, mapping, frame_camera = _frame_inputs(model, view, data, camera)
             runner.select([FrameOutputs(run_view(model, images, mapping), mapping,
                                         frame_camera.principal_point)], model.info.default_min_score)
         return _timed(run)
 
-    def inference_ms(data: bytes, camera: FisheyeCamera) -> float:
-        images, mapping = model_inputs(data, camera)
-        return _timed(lambda: run_view(model, images, mapping))
-
-    return Entry(name, RunnerPredictor(runner), frame_ms, inference_ms)
+    return Entry(name, RunnerPredictor(runner), frame_ms, _inference_timer(model, view))
 
 
 def _predictor_entry(name: str, predictor: Predictor) -> Entry:
