@@ -11,6 +11,10 @@ strip's. The figures of the README's "View planning" table come from this comman
         --data scenes4=../shared/real-frames/scenes4.json \\
         --data unseen=data/unseen1024/annotations.json --json view-designs.json
 
+With `--choose VAL` each design runs at its own operating point, the best F1 on those validation
+renders (`fishloc eval --operating-point`), rather than the one the model stores for its layout: a
+view unlike the ones the points were chosen on gets a fair threshold.
+
 The model must be a planned one (`fishloc export --planned`): the fixed strip is its one-band plan.
 """
 
@@ -25,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from contract import ModelError, ModelRunner, OnnxModel, SessionThreads
+from contract.metadata import OperatingPoint
 from contract.views import DEFAULT_VIEW, view_plan
 from fisheye.view_plan import ViewPlanConfig
 
@@ -56,18 +61,30 @@ DESIGNS: dict[str, ViewPlanConfig] = {
     # band over the same radii at 1.25x where 1.5x does not fit (1.28-1.44 M px with the nadir view)
     "rim band at 1.25x (scales 1 / 1.25 / 1.5), 1.5M + nadir view": dataclasses.replace(
         DEFAULT_VIEW, scales=(1.0, 1.25, 1.5), max_pixels=1_500_000),
+    # the rim band widened across the ray more than along it (`ViewPlanConfig.outer_row_scale`):
+    # at the default budget a person at the rim is 27 px along the ray and 8 across
+    "two bands 1.0x / 1.5x (the default at 4M) + nadir view": dataclasses.replace(
+        DEFAULT_VIEW, max_pixels=4_000_000),
+    **{f"rim band {across:g}x across, {along:g}x along + nadir view": dataclasses.replace(
+        DEFAULT_VIEW, scales=tuple(sorted({1.0, along, across})), max_pixels=4_000_000, outer_row_scale=along)
+       for across, along in ((1.5, 1.0), (2.0, 1.0), (1.5, 1.25))},
 }
 FIGURES = ("AP50", "precision", "recall", "AP_far", "recall_nadir", "mPE")
 
 
-def evaluate_design(model: OnnxModel, view: ViewPlanConfig, frames: Sequence[Any]) -> dict[str, Any]:
+def evaluate_design(model: OnnxModel, view: ViewPlanConfig, frames: Sequence[Any],
+                    point: OperatingPoint | None = None) -> dict[str, Any]:
     """`fishloc eval`'s metrics of `model` on `frames` with views planned by `view`, and the mean
-    cost ratio of the plans (pixels against the trained strip)."""
+    cost ratio of the plans (pixels against the trained strip); at `point` where given, else at
+    the model's own point for each view's layout."""
     from detector.evaluate import RunnerPredictor, evaluate, frame_camera
 
-    metrics = evaluate(RunnerPredictor(ModelRunner(model, view=view)), frames).metrics
+    metrics = evaluate(RunnerPredictor(ModelRunner(model, nms_iou=None if point is None else point.nms_iou,
+                                                   view=view)), frames,
+                       min_score=None if point is None else point.min_score).metrics
     costs = [view_plan(model.info, frame_camera(frame), view).cost_ratio for frame in frames]
-    return {**{k: metrics.get(k) for k in FIGURES}, "cost_ratio": sum(costs) / len(costs)}
+    chosen = {} if point is None else {"min_score": point.min_score, "nms_iou": point.nms_iou}
+    return {**{k: metrics.get(k) for k in FIGURES}, "cost_ratio": sum(costs) / len(costs), **chosen}
 
 
 def cell(value: Any) -> str:
@@ -75,13 +92,17 @@ def cell(value: Any) -> str:
 
 
 def markdown_table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
-    """Designs as rows; per set AP50 / precision (and AP_far, recall_nadir, mPE where the set has
-    floor positions), and the cost ratio of the first set's plans."""
+    """Designs as rows (with the operating point each was chosen, where it was); per set AP50 /
+    precision (and AP_far, recall_nadir, mPE where the set has floor positions), and the cost
+    ratio of the first set's plans."""
     sets = list(next(iter(results.values())))
     header = ["design", *[f"{s} AP50 / P" for s in sets], "renders AP_far / recall_nadir / mPE", "cost"]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for design, by_set in results.items():
-        cells = [design, *[f"{cell(by_set[s]['AP50'])} / {cell(by_set[s]['precision'])}" for s in sets]]
+        first = by_set[sets[0]]
+        name = design if "min_score" not in first else (
+            f"{design} (at {first['min_score']:g} / NMS {first['nms_iou']:g})")
+        cells = [name, *[f"{cell(by_set[s]['AP50'])} / {cell(by_set[s]['precision'])}" for s in sets]]
         rendered = [s for s in sets if by_set[s].get("mPE") is not None]
         extra = by_set[rendered[-1]] if rendered else {}
         cells.append(" / ".join(cell(extra.get(k)) for k in ("AP_far", "recall_nadir", "mPE")))
@@ -98,6 +119,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--limit", type=int, default=None, help="the first N frames of each set")
     parser.add_argument("--design", action="append", choices=list(DESIGNS), default=None,
                         help="only this design (repeat; default: every design)")
+    parser.add_argument("--choose", type=Path, default=None, metavar="ANNOTATIONS",
+                        help="validation renders on which each design gets its own operating point "
+                             "(best F1 over the NMS grid, `fishloc eval --operating-point`); default: "
+                             "the model's stored point for each view's layout")
     parser.add_argument("--threads", type=int, default=2, help="inference threads (default 2)")
     parser.add_argument("--json", type=Path, default=None, help="where to write every figure")
     args = parser.parse_args(argv)
@@ -107,6 +132,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         model = OnnxModel(args.model, SessionThreads(intra_op=args.threads))
         if not model.info.planned:
             raise ModelError(f"{args.model} is not a planned model (fishloc export --planned)")
+        choose_on = None if args.choose is None else read_dataset(args.choose)[:args.limit]
         sets = {}
         for item in args.data:
             name, _, path = item.partition("=")
@@ -120,7 +146,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     for design, view in DESIGNS.items():
         if args.design is not None and design not in args.design:
             continue
-        results[design] = {name: evaluate_design(model, view, frames) for name, frames in sets.items()}
+        point = None
+        if choose_on is not None:
+            from detector.evaluate import choose_operating_point
+
+            best = choose_operating_point(model, choose_on, view=view)[0]
+            point = OperatingPoint(best.min_score, best.nms_iou)
+        results[design] = {name: evaluate_design(model, view, frames, point) for name, frames in sets.items()}
         print(json.dumps({design: results[design]}), file=sys.stderr, flush=True)
     print(markdown_table(results))
     if args.json is not None:

@@ -35,6 +35,25 @@ def test_every_design_on_every_set(tmp_path: Path, capsys: pytest.CaptureFixture
     assert table.count("\n") == len(DESIGNS) + 2 and "samples AP50 / P" in table  # header, rule, rows
 
 
+def test_each_design_at_its_own_point_chosen_on_validation_frames(tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    from contract import OnnxModel, SessionThreads
+    from detector.data.readers import read_dataset
+    from detector.evaluate import choose_operating_point
+
+    model = save_polar_double(tmp_path / "planned.onnx", planned=True)
+    out = tmp_path / "designs.json"
+    samples = ROOT / "samples" / "annotations.json"
+    design = "rim band 1.5x across, 1x along + nadir view"
+    assert main(["--model", str(model), "--data", f"samples={samples}", "--choose", str(samples),
+                 "--design", design, "--limit", "2", "--threads", "1", "--json", str(out)]) == 0
+    figures = json.loads(out.read_text())[design]["samples"]
+    best = choose_operating_point(OnnxModel(model, SessionThreads(intra_op=1)), read_dataset(samples)[:2],
+                                  view=DESIGNS[design])[0]
+    assert (figures["min_score"], figures["nms_iou"]) == (best.min_score, best.nms_iou)
+    assert f"{design} (at {best.min_score:g} / NMS {best.nms_iou:g})" in capsys.readouterr().out
+
+
 def test_a_fixed_strip_model_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     model = save_polar_double(tmp_path / "fixed.onnx")
     samples = ROOT / "samples" / "annotations.json"

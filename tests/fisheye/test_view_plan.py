@@ -63,6 +63,35 @@ def test_the_outer_band_keeps_the_trained_shape() -> None:
         assert row_scale == pytest.approx(band.scale, rel=0.08)  # rows are rounded to 16
 
 
+def test_an_outer_band_widened_across_the_ray_alone() -> None:
+    wide = dataclasses.replace(LARGE, outer_row_scale=1.0)
+    plan, alike = plan_view(DEMO, config=wide), plan_view(DEMO, config=LARGE)
+    reference = ViewReference()
+    inner, outer = plan.bands
+    assert (outer.scale, outer.row_scale, outer.pieces) == (1.5, 1.0, 3) and inner.row_scale is None
+    # Its columns are the 1.5x band's, its rows those of the trained scale over the same radii.
+    grid = plan.grids[2]
+    assert grid.width / reference.turn_columns == pytest.approx(1.5)
+    rows_scale = grid.px_per_radius_px / (reference.rows / ring_radius_px(DEMO, 90.0))
+    assert rows_scale == pytest.approx(1.0, rel=0.08)
+    assert outer.rows < alike.bands[1].rows and plan.pixels < alike.pixels
+    assert plan.bands[0] == alike.bands[0] and outer.owned_px == alike.bands[1].owned_px
+    # The smallest person keeps the wide band's width and the trained scale's length.
+    assert plan.smallest.across_px == pytest.approx(alike.smallest.across_px, rel=0.02)
+    assert plan.smallest.along_px < 0.8 * alike.smallest.along_px
+    assert plan.public()["bands"][1]["row_scale"] == 1.0 and "row_scale" not in plan.public()["bands"][0]
+
+
+def test_a_budget_that_binds_steps_a_widened_band_down_keeping_its_rows() -> None:
+    wide = ViewPlanConfig(scales=(1.0, 1.25, 1.5), max_pixels=4_000_000, outer_row_scale=1.0,
+                          nadir_fraction=None)
+    budget = plan_view(DEMO, config=wide).pixels - 1
+    config = dataclasses.replace(wide, max_pixels=budget)
+    plan = plan_view(DEMO, config=config)
+    assert plan.pixels <= budget and plan.bands[1].scale == 1.25 and plan.bands[1].row_scale == 1.0
+    assert any("at scale 1.25, not 1.5" in note for note in plan.notes)
+
+
 def test_people_shrink_towards_the_rim() -> None:
     radii = np.linspace(300, 850, 8)  # feet up to the planned floor (θ ≤ 80°)
     along, across, distance = person_sizes(DEMO, radii, ViewPlanConfig())
@@ -137,7 +166,8 @@ def test_a_budget_below_any_view_is_refused() -> None:
 
 @pytest.mark.parametrize("kwargs", [{"scales": ()}, {"scales": (1.5, 1.0)}, {"max_pixels": 10},
                                     {"target_along_px": 0.0}, {"person_height_m": 4.0},
-                                    {"min_outer_fraction": 0.0}, {"min_outer_fraction": 1.0}])
+                                    {"min_outer_fraction": 0.0}, {"min_outer_fraction": 1.0},
+                                    {"outer_row_scale": 0.5}, {"outer_row_scale": 2.0}])
 def test_config_refuses_nonsense(kwargs: dict[str, object]) -> None:
     with pytest.raises(ValueError):
         ViewPlanConfig(**kwargs)  # type: ignore[arg-type]
