@@ -304,8 +304,8 @@ def run(args: argparse.Namespace) -> int:
     Path(args.json).write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
     if args.plots:
         write_plots(evaluation, Path(args.plots), Path(args.model).name)
-    keys: tuple[str, ...] = ("mAP", "AP50", "AP75", "AP_near", "AP_mid", "AP_far", "mPE", "mPE_center",
-                             "PE_far", "precision", "recall")
+    keys: tuple[str, ...] = ("mAP", "AP50", "AP75", "AP_near", "AP_mid", "AP_far", "mPE", "mPE_reported",
+                             "mPE_center", "PE_far", "precision", "recall")
     keys += tuple(k for k in ("AP50_radius_aligned",) if k in metrics)  # files with their own boxes
     print(json.dumps({k: metrics.get(k) for k in keys}))
     return 0

@@ -12,6 +12,9 @@
   placed by their foot point (`mPE`, `PE_near/mid/far` by GT distance): the model's own `foot`
   output where it has one, else the box-side foot point; by the box-side foot point alone
   (`mPE_box_side`, ...) and by their box centre (`mPE_center`, ...), all on the same matches.
+  These matches take every detection from the evaluation's lowest score (0.05), as AP does;
+  `mPE_reported` (and `PE_matches_reported`) keeps those at or above the threshold of precision and
+  recall: the people the service reports, whose floor positions users get.
 - precision / recall at one score threshold, matched at IoU 0.5; `recall_nadir` the recall of the
   people below the lens (box centre within 0.2 of the image circle's radius), seen from above.
 
@@ -216,12 +219,14 @@ def placement_points(frame: EvalFrame, det_index: NDArray[np.int64], placement: 
     return foot_points(boxes, frame.principal_point).reshape(-1, 2)
 
 
-def _localisation_errors(frame: EvalFrame, match: FrameMatch) -> tuple[dict[str, FloatArray], FloatArray]:
-    """Errors (M,) m by each placement and GT distances (M,) m of the IoU-0.5 matches with known
-    positions; a match without a floor point by any placement is left out of every one."""
+def _localisation_errors(frame: EvalFrame, match: FrameMatch
+                         ) -> tuple[dict[str, FloatArray], FloatArray, FloatArray]:
+    """Errors (M,) m by each placement, GT distances (M,) m and detection scores (M,) of the IoU-0.5
+    matches with known positions; a match without a floor point by any placement is left out of
+    every one."""
     camera = frame.floor_camera
     if camera is None:
-        return {p: np.zeros(0) for p in PLACEMENT_SUFFIX}, np.zeros(0)
+        return {p: np.zeros(0) for p in PLACEMENT_SUFFIX}, np.zeros(0), np.zeros(0)
     matched = greedy_match(match.iou, 0.5)
     det_index = match.order[matched >= 0]
     gt_index = matched[matched >= 0]
@@ -229,17 +234,27 @@ def _localisation_errors(frame: EvalFrame, match: FrameMatch) -> tuple[dict[str,
     errors = {p: np.linalg.norm(camera.pixels_to_floor(placement_points(frame, det_index, p)) - truth, axis=1)
               for p in PLACEMENT_SUFFIX}
     valid = np.all(np.isfinite(np.stack(list(errors.values()))), axis=0)
-    return {p: e[valid] for p, e in errors.items()}, frame.gt_distances_m[gt_index][valid]
+    return ({p: e[valid] for p, e in errors.items()}, frame.gt_distances_m[gt_index][valid],
+            frame.det_scores[det_index][valid])
 
 
-def _localisation(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch]
-                  ) -> tuple[FloatArray, dict[str, FloatArray]]:
-    """GT distance (M,) of every IoU-0.5 match with a floor point over the frames, and its error
-    (M,) m by each placement."""
-    pairs = [_localisation_errors(f, m) for f, m in zip(frames, prepared, strict=True)]
-    distances = np.concatenate([d for _, d in pairs]) if pairs else np.zeros(0)
-    return distances, {p: np.concatenate([e[p] for e, _ in pairs]) if pairs else np.zeros(0)
-                       for p in PLACEMENT_SUFFIX}
+def _localisation(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch], min_score: float | None = None
+                  ) -> tuple[FloatArray, dict[str, FloatArray], NDArray[np.bool_]]:
+    """GT distance (M,) of every IoU-0.5 match with a floor point over the frames, its error (M,) m
+    by each placement, and (M,) whether its detection scores at least `min_score` (None: each
+    frame's own threshold; all False where a frame has neither)."""
+    found = [_localisation_errors(f, m) for f, m in zip(frames, prepared, strict=True)]
+    reported = [scores >= _threshold_or_inf(frame, min_score)
+                for frame, (_, _, scores) in zip(frames, found, strict=True)]
+    distances = np.concatenate([d for _, d, _ in found]) if found else np.zeros(0)
+    return (distances, {p: np.concatenate([e[p] for e, _, _ in found]) if found else np.zeros(0)
+                        for p in PLACEMENT_SUFFIX},
+            np.concatenate(reported) if reported else np.zeros(0, dtype=bool))
+
+
+def _threshold_or_inf(frame: EvalFrame, min_score: float | None) -> float:
+    """`frame_threshold`, or infinity for a frame that has none (no match of it counts as reported)."""
+    return math.inf if min_score is None and frame.min_score is None else frame_threshold(frame, min_score)
 
 
 def _mean(values: FloatArray) -> float:
@@ -317,7 +332,9 @@ def compute_metrics(frames: Sequence[EvalFrame], min_score: float | None) -> dic
     result: dict[str, float] = _ap_summary(frames, prepared)
     for name, distance_range in DISTANCE_BINS_M.items():
         result[f"AP_{name}"] = _ap_at(frames, prepared, 0.5, distance_range)
-    distances, by_placement = _localisation(frames, prepared)
+    distances, by_placement, reported = _localisation(frames, prepared, min_score)
+    result["mPE_reported"] = _mean(by_placement[FOOT][reported])
+    result["PE_matches_reported"] = float(reported.sum())
     for placement, suffix in PLACEMENT_SUFFIX.items():
         errors = by_placement[placement]
         result[f"mPE{suffix}"] = _mean(errors)
@@ -340,4 +357,5 @@ def compute_metrics(frames: Sequence[EvalFrame], min_score: float | None) -> dic
 def localisation_points(frames: Sequence[EvalFrame]) -> tuple[FloatArray, dict[str, FloatArray]]:
     """GT distance (M,) of every IoU-0.5 match with a floor point, and its error (M,) m by each
     placement (FOOT, BOX_SIDE, CENTRE)."""
-    return _localisation(frames, [prepare_match(frame) for frame in frames])
+    distances, by_placement, _ = _localisation(frames, [prepare_match(frame) for frame in frames])
+    return distances, by_placement

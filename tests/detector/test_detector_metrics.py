@@ -63,6 +63,22 @@ def test_foot_point_and_centre_errors_by_hand() -> None:
     assert math.isnan(metrics["PE_far"]) and math.isnan(metrics["AP_far"])
 
 
+def test_the_reported_people_error_keeps_the_matches_at_the_threshold() -> None:
+    # Two people, each matched by its own box: foot points 60 px (θ 0.6) and 100 px (θ 1.0) out,
+    # the first at score 0.9, the second at 0.2, below the threshold 0.5.
+    near, farther = [199.5, 119.5, 16.0, 40.0], [199.5, 79.5, 16.0, 40.0]
+    frame = _frame([near, farther], [[0.0, 2.0], [0.0, 4.0]], [near, farther], [0.9, 0.2])
+    errors = [abs(3 * math.tan(0.6) - 2.0), abs(3 * math.tan(1.0) - 4.0)]
+    metrics = compute_metrics([frame], min_score=0.5)
+    assert metrics["mPE"] == pytest.approx(sum(errors) / 2) and metrics["PE_matches"] == 2.0
+    assert metrics["mPE_reported"] == pytest.approx(errors[0]) and metrics["PE_matches_reported"] == 1.0
+    # With no threshold given, each frame's own operating threshold decides.
+    own = compute_metrics([replace(frame, min_score=0.1)], min_score=None)
+    assert own["mPE_reported"] == pytest.approx(own["mPE"]) and own["PE_matches_reported"] == 2.0
+    nobody = compute_metrics([frame], min_score=0.95)
+    assert math.isnan(nobody["mPE_reported"]) and nobody["PE_matches_reported"] == 0.0
+
+
 def test_distance_bins_precision_and_recall() -> None:
     near = [199.5, 119.5, 16.0, 40.0]  # person about 2 m out
     far_radius = 145.0  # 3·tan(1.45) ≈ 24.7 m from the nadir
