@@ -69,7 +69,7 @@ DESIGNS: dict[str, ViewPlanConfig] = {
         DEFAULT_VIEW, scales=tuple(sorted({1.0, along, across})), max_pixels=4_000_000, outer_row_scale=along)
        for across, along in ((1.5, 1.0), (2.0, 1.0), (1.5, 1.25))},
 }
-FIGURES = ("AP50", "precision", "recall", "AP_far", "recall_nadir", "mPE")
+FIGURES = ("AP50", "precision", "recall", "AP_far", "recall_nadir", "mPE", "mPE_reported")
 
 
 def evaluate_design(model: OnnxModel, view: ViewPlanConfig, frames: Sequence[Any],
