@@ -101,8 +101,9 @@ def _inference_timer(model: ContractModel, view: ViewPlanConfig) -> Callable[[by
     return inference_ms
 
 
-def _onnx_entry(name: str, path: str, threads: int, view: ViewPlanConfig = DEFAULT_VIEW) -> Entry:
-    model = OnnxModel(path, SessionThreads(intra_op=threads))
+def _onnx_entry(name: str, path: str, threads: int, view: ViewPlanConfig = DEFAULT_VIEW,
+                spinning: bool = False) -> Entry:
+    model = OnnxModel(path, SessionThreads(intra_op=threads, allow_spinning=spinning))
     pipeline = Pipeline(model, PipelineConfig(view=view))
     pipeline.warm_up()
     return Entry(name, RunnerPredictor(ModelRunner(model, view=view)),
@@ -162,9 +163,14 @@ def view_from_spec(text: str) -> ViewPlanConfig:
     return dataclasses.replace(DEFAULT_VIEW, max_pixels=int(pixels), **changes)  # type: ignore[arg-type]
 
 
+# A model spec's field: its session's threads spin, as `fishloc serve --onnx-spinning` runs them.
+SPINNING = "onnx_spinning=1"
+
+
 def build_entry(name: str, spec: str, threads: int) -> Entry:
     """`spec` is an ONNX file (`FILE@PIXELS`: a planned model's views within PIXELS, as `fishloc
-    serve --max-view-pixels`; `FILE@PIXELS,nadir_scale=1.25`: other fields of the plan too), a
+    serve --max-view-pixels`; `FILE@PIXELS,nadir_scale=1.25`: other fields of the plan too;
+    `FILE@PIXELS,onnx_spinning=1`: its threads spinning, as `fishloc serve --onnx-spinning`), a
     checkpoint, or `KIND:ONNX` for a zero-shot baseline."""
     kind, _, path = spec.partition(":")
     if kind == "tiled" and path:
@@ -172,8 +178,11 @@ def build_entry(name: str, spec: str, threads: int) -> Entry:
     if kind in BASELINES and path:
         return _predictor_entry(name, BASELINES[kind](path, threads))
     file, _, view_text = spec.partition("@")
+    fields = view_text.split(",") if view_text else []
+    plan = [field for field in fields if field != SPINNING]
     if Path(file).suffix.lower() == ".onnx":
-        return _onnx_entry(name, file, threads, view_from_spec(view_text) if view_text else DEFAULT_VIEW)
+        return _onnx_entry(name, file, threads, view_from_spec(",".join(plan)) if plan else DEFAULT_VIEW,
+                           spinning=SPINNING in fields)
     return _predictor_entry(name, load_predictor(spec, threads=threads))
 
 
@@ -231,7 +240,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--model", action="append", default=[], metavar="NAME=PATH",
                         help="a FishLoc ONNX model or checkpoint (repeat); PATH@PIXELS[,FIELD=VALUE...] "
                              "runs a planned model in the views of that budget and plan, e.g. "
-                             "model.onnx@1000000,nadir_scale=1.25")
+                             "model.onnx@1000000,nadir_scale=1.25; a field onnx_spinning=1 lets its "
+                             "session's threads spin (fishloc serve --onnx-spinning)")
     parser.add_argument("--baseline", action="append", default=[], metavar="NAME=KIND:ONNX",
                         help="a zero-shot baseline (repeat): rotations:ONNX or letterbox:ONNX, or "
                              "tiled:ONNX[@PIXELS][,min_score=S,nms_iou=I]: a COCO file read in windows "

@@ -26,10 +26,13 @@ FOOT_OUTPUT = "foot"
 class SessionThreads:
     """onnxruntime thread counts: `intra_op` threads within an operator, `inter_op` across them.
 
-    `allow_spinning` lets idle pool threads busy-wait for the next operator (onnxruntime's default).
-    Off here: on a few shared cores the spinning threads take the CPU from the JPEG decode of the
-    next frame and from other processes; `fishloc bench` measured 1.5-2x higher latency with it on
-    a 2-core machine (README, Benchmark).
+    `allow_spinning` lets idle pool threads busy-wait for the next operator (onnxruntime's default)
+    instead of sleeping: a frame alone on the cores is answered about a fifth sooner (0.7.2, 2952²
+    frames, 2 cores), for about a fifth fewer frames per second once several run at once, whose
+    threads then spin against each other (README, "Spinning inference threads"). Off by default;
+    `fishloc serve --onnx-spinning` turns it on. Either way the pools stop spinning as soon as a
+    run returns (`session.force_spinning_stop`), so they never take the CPU from the next frame's
+    decode.
     """
 
     intra_op: int
@@ -122,6 +125,7 @@ class OnnxModel:
         spinning = "1" if threads.allow_spinning else "0"
         options.add_session_config_entry("session.intra_op.allow_spinning", spinning)
         options.add_session_config_entry("session.inter_op.allow_spinning", spinning)
+        options.add_session_config_entry("session.force_spinning_stop", "1")  # idle between runs
         try:
             self.session = ort.InferenceSession(
                 data, sess_options=options, providers=["CPUExecutionProvider"]
@@ -136,7 +140,7 @@ class OnnxModel:
         # The session of the graph cut to boxes and scores (`run_boxes`), made on first use: only a
         # view with the nadir view needs it. Where it cannot pay, the full session serves.
         self._cut: tuple[bytes, ort.SessionOptions] | None = (
-            (data, options) if self.has_foot and self.info.planned and not threads.allow_spinning else None)
+            (data, options) if self.has_foot and self.info.planned else None)
         self._boxes_session: ort.InferenceSession | None = None
         self._cut_lock = threading.Lock()
 
@@ -144,8 +148,9 @@ class OnnxModel:
         """A planned model's nadir view places its people by the box side: a second session of the
         graph cut to `boxes` and `scores` skips the foot branch there (onnxruntime runs every node
         of a graph whatever outputs are asked for; 17 against 29 ms for the 448 px crop, README
-        "The nadir view ..."). None where there is nothing to skip, or where the two sessions'
-        thread pools would spin against each other (`allow_spinning`): the full session serves."""
+        "The nadir view ..."). None where there is nothing to skip: the full session serves. The two
+        sessions run one after the other and their pools stop spinning when a run returns, so with
+        `allow_spinning` too they do not spin against each other."""
         with self._cut_lock:
             if self._cut is not None:
                 data, options = self._cut

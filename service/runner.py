@@ -162,7 +162,8 @@ def build_runner(settings: Settings, metrics: ServiceMetrics) -> InferenceRunner
     # The thread budget belongs to onnxruntime and to parallel frames; OpenCV's own pool would
     # compete with both for the same cores.
     cv2.setNumThreads(1)
-    model = OnnxModel(settings.model, SessionThreads(intra_op=settings.threads, inter_op=1))
+    model = OnnxModel(settings.model, SessionThreads(intra_op=settings.threads, inter_op=1,
+                                                     allow_spinning=settings.onnx_spinning))
     view = dataclasses.replace(DEFAULT_VIEW, max_pixels=settings.max_view_pixels)
     pipeline = Pipeline(model, PipelineConfig(
         nms_iou=settings.nms_iou, max_pixels=settings.max_pixels, view=view,

@@ -70,6 +70,9 @@ class Settings(BaseSettings):
                                                     "(its `max_view_pixels`)")
     threads: int = Field(default_factory=cpu_budget, ge=1,
                          description="inference threads (default: the CPU quota of the container)")
+    onnx_spinning: bool = Field(False, description="let onnxruntime's idle threads busy-wait within a "
+                                "run: lower latency for one frame at a time, fewer frames per second "
+                                "for several at once")
     max_in_flight: int | None = Field(None, ge=1,
                                       description="frames admitted at once before 503 (default 4 × threads)")
     retry_after_s: int = Field(1, ge=1, description="Retry-After of an overload answer")

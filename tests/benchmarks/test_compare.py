@@ -44,6 +44,18 @@ def test_a_model_spec_names_the_budget_and_other_fields_of_the_plan() -> None:
             view_from_spec(bad)
 
 
+def test_a_model_spec_may_let_its_threads_spin() -> None:
+    from benchmarks.compare import build_entry
+
+    model = ROOT / "models" / "fishloc-default.onnx"
+    for spec, spinning in ((f"{model}", "0"), (f"{model}@900000,onnx_spinning=1", "1"),
+                           (f"{model}@onnx_spinning=1", "1")):
+        entry = build_entry("m", spec, 1)
+        session = entry.predictor.runner.model.session  # type: ignore[attr-defined]
+        assert session.get_session_options().get_session_config_entry(
+            "session.intra_op.allow_spinning") == spinning
+
+
 def test_a_coco_file_read_in_windows_is_evaluated_and_timed_in_the_planned_view(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "compare.json"
