@@ -102,8 +102,8 @@ def _inference_timer(model: ContractModel, view: ViewPlanConfig) -> Callable[[by
 
 
 def _onnx_entry(name: str, path: str, threads: int, view: ViewPlanConfig = DEFAULT_VIEW,
-                spinning: bool = False) -> Entry:
-    model = OnnxModel(path, SessionThreads(intra_op=threads, allow_spinning=spinning))
+                spinning: str = "off") -> Entry:
+    model = OnnxModel(path, SessionThreads(intra_op=threads, spinning=spinning))
     pipeline = Pipeline(model, PipelineConfig(view=view))
     pipeline.warm_up()
     return Entry(name, RunnerPredictor(ModelRunner(model, view=view)),
@@ -163,15 +163,16 @@ def view_from_spec(text: str) -> ViewPlanConfig:
     return dataclasses.replace(DEFAULT_VIEW, max_pixels=int(pixels), **changes)  # type: ignore[arg-type]
 
 
-# A model spec's field: its session's threads spin, as `fishloc serve --onnx-spinning` runs them.
-SPINNING = "onnx_spinning=1"
+# A model spec's field: its sessions' spinning policy, as `fishloc serve --onnx-spinning` sets it.
+SPINNING = "onnx_spinning="
 
 
 def build_entry(name: str, spec: str, threads: int) -> Entry:
     """`spec` is an ONNX file (`FILE@PIXELS`: a planned model's views within PIXELS, as `fishloc
     serve --max-view-pixels`; `FILE@PIXELS,nadir_scale=1.25`: other fields of the plan too;
-    `FILE@PIXELS,onnx_spinning=1`: its threads spinning, as `fishloc serve --onnx-spinning`), a
-    checkpoint, or `KIND:ONNX` for a zero-shot baseline."""
+    `FILE@PIXELS,onnx_spinning=on`: its sessions' spinning policy, as `fishloc serve
+    --onnx-spinning` sets it; "off" otherwise), a checkpoint, or `KIND:ONNX` for a zero-shot
+    baseline. Timing runs one frame at a time, so "alone" times as "on" does."""
     kind, _, path = spec.partition(":")
     if kind == "tiled" and path:
         return _tiled_entry(name, path, threads)
@@ -179,10 +180,11 @@ def build_entry(name: str, spec: str, threads: int) -> Entry:
         return _predictor_entry(name, BASELINES[kind](path, threads))
     file, _, view_text = spec.partition("@")
     fields = view_text.split(",") if view_text else []
-    plan = [field for field in fields if field != SPINNING]
+    plan = [field for field in fields if not field.startswith(SPINNING)]
+    spinning = next((field.removeprefix(SPINNING) for field in fields if field.startswith(SPINNING)), "off")
     if Path(file).suffix.lower() == ".onnx":
         return _onnx_entry(name, file, threads, view_from_spec(",".join(plan)) if plan else DEFAULT_VIEW,
-                           spinning=SPINNING in fields)
+                           spinning=spinning)
     return _predictor_entry(name, load_predictor(spec, threads=threads))
 
 
@@ -240,8 +242,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--model", action="append", default=[], metavar="NAME=PATH",
                         help="a FishLoc ONNX model or checkpoint (repeat); PATH@PIXELS[,FIELD=VALUE...] "
                              "runs a planned model in the views of that budget and plan, e.g. "
-                             "model.onnx@1000000,nadir_scale=1.25; a field onnx_spinning=1 lets its "
-                             "session's threads spin (fishloc serve --onnx-spinning)")
+                             "model.onnx@1000000,nadir_scale=1.25; a field onnx_spinning=off|alone|on "
+                             "sets its sessions' spinning policy (fishloc serve --onnx-spinning; default "
+                             "off)")
     parser.add_argument("--baseline", action="append", default=[], metavar="NAME=KIND:ONNX",
                         help="a zero-shot baseline (repeat): rotations:ONNX or letterbox:ONNX, or "
                              "tiled:ONNX[@PIXELS][,min_score=S,nms_iou=I]: a COCO file read in windows "

@@ -7,11 +7,13 @@ Inputs and outputs are checked on load against the model's own metadata: input `
 
 from __future__ import annotations
 
-import dataclasses
+import contextlib
 import hashlib
 import threading
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import onnxruntime as ort
@@ -22,26 +24,37 @@ from contract.metadata import ModelError, ModelInfo, parse_metadata
 FOOT_OUTPUT = "foot"
 
 
+# How a model's thread pools wait between a run's operators (`SessionThreads.spinning`).
+SPINNING_POLICIES = ("off", "alone", "on")
+
+
 @dataclass(frozen=True)
 class SessionThreads:
     """onnxruntime thread counts: `intra_op` threads within an operator, `inter_op` across them.
 
-    `allow_spinning` lets idle pool threads busy-wait for the next operator (onnxruntime's default)
-    instead of sleeping: a frame alone on the cores is answered about a fifth sooner (0.7.2, 2952²
-    frames, 2 cores), for about a fifth fewer frames per second once several run at once, whose
-    threads then spin against each other (README, "Spinning inference threads"). Off by default;
-    `fishloc serve --onnx-spinning` turns it on. Either way the pools stop spinning as soon as a
-    run returns (`session.force_spinning_stop`), so they never take the CPU from the next frame's
-    decode.
+    `spinning` says whether idle pool threads busy-wait for the next operator (onnxruntime's
+    `allow_spinning`) instead of sleeping until they are woken, about 600 times a run of the
+    shipped graph:
+    - "off": they sleep;
+    - "on": they spin in every run; a frame alone on the cores is answered about a fifth sooner
+      (0.7.2, 2952² frames, 2 cores), and once several frames run at once their threads spin
+      against each other, for about a fifth fewer frames per second;
+    - "alone": a frame that has the model to itself (`OnnxModel.frame`) runs in sessions whose
+      pools spin, one that shares it in sessions whose pools sleep: the latency of "on" for one
+      stream, the throughput of "off" for several (README, "Spinning inference threads").
+    Whichever, pools stop spinning as soon as a run returns (`session.force_spinning_stop`), so
+    they never take the CPU from the next frame's decode.
     """
 
     intra_op: int
     inter_op: int = 1
-    allow_spinning: bool = False
+    spinning: str = "off"
 
     def __post_init__(self) -> None:
         if self.intra_op < 1 or self.inter_op < 1:
             raise ValueError(f"thread counts must be ≥ 1, got {self.intra_op}, {self.inter_op}")
+        if self.spinning not in SPINNING_POLICIES:
+            raise ValueError(f"spinning must be one of {SPINNING_POLICIES}, got {self.spinning!r}")
 
 
 @dataclass(frozen=True)
@@ -108,24 +121,57 @@ def _boxes_only(data: bytes) -> bytes:
     return bytes(Extractor(model).extract_model(["image"], ["boxes", "scores"]).SerializeToString())
 
 
+def _session_options(threads: SessionThreads, spinning: bool) -> ort.SessionOptions:
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = threads.intra_op
+    options.inter_op_num_threads = threads.inter_op
+    options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+    options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+    options.log_severity_level = 3
+    flag = "1" if spinning else "0"
+    options.add_session_config_entry("session.intra_op.allow_spinning", flag)
+    options.add_session_config_entry("session.inter_op.allow_spinning", flag)
+    options.add_session_config_entry("session.force_spinning_stop", "1")  # idle between runs
+    return options
+
+
+class _Sessions:
+    """The model's graph in one onnxruntime session, and the graph cut to `boxes` and `scores`
+    (`run_boxes`) in a second one, made on first use: only a view with the nadir view needs it.
+    A planned model's nadir view places its people by the box side, and onnxruntime runs every
+    node of a graph whatever outputs are asked for: the cut skips the foot branch there (17
+    against 29 ms for the 448 px crop, README "The nadir view ..."). Where there is nothing to
+    skip, or onnx cannot cut the graph, the full session serves."""
+
+    def __init__(self, session: ort.InferenceSession, cut: tuple[bytes, ort.SessionOptions] | None) -> None:
+        self.session = session
+        self._cut = cut
+        self._boxes_session: ort.InferenceSession | None = None
+        self._lock = threading.Lock()
+
+    def boxes_session(self) -> ort.InferenceSession:
+        with self._lock:
+            if self._cut is not None:
+                data, options = self._cut
+                self._cut = None
+                try:
+                    self._boxes_session = ort.InferenceSession(
+                        _boxes_only(data), sess_options=options, providers=["CPUExecutionProvider"])
+                except Exception:  # a graph onnx cannot cut: the full session serves the nadir view too
+                    self._boxes_session = None
+            return self._boxes_session or self.session
+
+
 class OnnxModel:
-    """A contract-following model in an onnxruntime session with explicit thread counts."""
+    """A contract-following model in onnxruntime sessions with explicit thread counts and a
+    spinning policy (`SessionThreads`)."""
 
     def __init__(self, path: str | Path, threads: SessionThreads) -> None:
         self.path = Path(path)
         if not self.path.is_file():
             raise ModelError(f"model file {self.path} does not exist")
         data = self.path.read_bytes()
-        options = ort.SessionOptions()
-        options.intra_op_num_threads = threads.intra_op
-        options.inter_op_num_threads = threads.inter_op
-        options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
-        options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-        options.log_severity_level = 3
-        spinning = "1" if threads.allow_spinning else "0"
-        options.add_session_config_entry("session.intra_op.allow_spinning", spinning)
-        options.add_session_config_entry("session.inter_op.allow_spinning", spinning)
-        options.add_session_config_entry("session.force_spinning_stop", "1")  # idle between runs
+        options = _session_options(threads, spinning=threads.spinning == "on")
         try:
             self.session = ort.InferenceSession(
                 data, sess_options=options, providers=["CPUExecutionProvider"]
@@ -137,30 +183,53 @@ class OnnxModel:
         self.info = parse_metadata(props, str(self.path), hashlib.sha256(data).hexdigest())
         self.has_foot = _check_signature(self.session, self.path, self.info)
         self._outputs = ["boxes", "scores", FOOT_OUTPUT] if self.has_foot else ["boxes", "scores"]
-        # The session of the graph cut to boxes and scores (`run_boxes`), made on first use: only a
-        # view with the nadir view needs it. Where it cannot pay, the full session serves.
-        self._cut: tuple[bytes, ort.SessionOptions] | None = (
-            (data, options) if self.has_foot and self.info.planned else None)
-        self._boxes_session: ort.InferenceSession | None = None
-        self._cut_lock = threading.Lock()
+        cuts = self.has_foot and self.info.planned
+        self._sessions = _Sessions(self.session, (data, options) if cuts else None)
+        # "alone": the same graph again in sessions whose pools spin, for a frame that has the model
+        # to itself; `_frames` and `_runs` count what is in flight (`frame`, `_chosen`).
+        self._spinning: _Sessions | None = None
+        if threads.spinning == "alone":
+            spin = _session_options(threads, spinning=True)
+            self._spinning = _Sessions(
+                ort.InferenceSession(data, sess_options=spin, providers=["CPUExecutionProvider"]),
+                (data, spin) if cuts else None)
+        self._frames = 0
+        self._runs = 0
+        self._count_lock = threading.Lock()
 
-    def _boxes_only_session(self) -> ort.InferenceSession | None:
-        """A planned model's nadir view places its people by the box side: a second session of the
-        graph cut to `boxes` and `scores` skips the foot branch there (onnxruntime runs every node
-        of a graph whatever outputs are asked for; 17 against 29 ms for the 448 px crop, README
-        "The nadir view ..."). None where there is nothing to skip: the full session serves. The two
-        sessions run one after the other and their pools stop spinning when a run returns, so with
-        `allow_spinning` too they do not spin against each other."""
-        with self._cut_lock:
-            if self._cut is not None:
-                data, options = self._cut
-                self._cut = None
-                try:
-                    self._boxes_session = ort.InferenceSession(
-                        _boxes_only(data), sess_options=options, providers=["CPUExecutionProvider"])
-                except Exception:  # a graph onnx cannot cut: the full session serves the nadir view too
-                    self._boxes_session = None
-            return self._boxes_session
+    @contextlib.contextmanager
+    def frame(self) -> Iterator[None]:
+        """Marks one frame in flight, from its decode to its last run: under the "alone" policy a
+        run spins only while no other frame is in flight (`SessionThreads`)."""
+        with self._count_lock:
+            self._frames += 1
+        try:
+            yield
+        finally:
+            with self._count_lock:
+                self._frames -= 1
+
+    @contextlib.contextmanager
+    def _chosen(self) -> Iterator[_Sessions]:
+        """The sessions a run goes to: the spinning ones where the policy is "alone" and nothing
+        else is in flight (at most this run's own frame, no other run), else the model's own."""
+        with self._count_lock:
+            alone = self._spinning is not None and self._frames <= 1 and self._runs == 0
+            self._runs += 1
+        try:
+            yield self._spinning if alone and self._spinning is not None else self._sessions
+        finally:
+            with self._count_lock:
+                self._runs -= 1
+
+    def warm_up(self, image: NDArray[np.uint8], boxes_image: NDArray[np.uint8] | None = None) -> None:
+        """One run of `image` (and a boxes-only run of `boxes_image`) in every session set the
+        policy may choose, so that no frame pays for a session's lazy set-up."""
+        for sessions in (self._sessions, self._spinning):
+            if sessions is not None:
+                self._run_in(sessions.session, self._outputs, image[None])
+                if boxes_image is not None:
+                    self._run_in(sessions.boxes_session(), ["boxes", "scores"], boxes_image[None])
 
     def blank_input(self) -> NDArray[np.uint8]:
         """An input of the model's shape filled with its pad value (for warm-up)."""
@@ -179,10 +248,15 @@ class OnnxModel:
             raise ValueError(f"model input must be (N, {height}, {width}, 3) uint8, "
                              f"got {images.shape} {images.dtype}")
 
+    def _run_in(self, session: ort.InferenceSession, outputs: list[str], images: NDArray[np.uint8]
+                ) -> list[NDArray[Any]]:
+        self._check_input(images)
+        return [np.asarray(out) for out in session.run(outputs, {"image": images})]
+
     def run_batch(self, images: NDArray[np.uint8]) -> list[RawOutputs]:
         """(N, H, W, 3) uint8 RGB inputs -> one RawOutputs each."""
-        self._check_input(images)
-        found = self.session.run(self._outputs, {"image": images})
+        with self._chosen() as sessions:
+            found = self._run_in(sessions.session, self._outputs, images)
         boxes, scores = (np.asarray(found[i], dtype=np.float32) for i in (0, 1))
         foot = np.asarray(found[2], dtype=np.float32) if self.has_foot else None
         if boxes.ndim != 3 or boxes.shape[0] != len(images):
@@ -196,11 +270,12 @@ class OnnxModel:
 
     def run_boxes(self, image: NDArray[np.uint8]) -> RawOutputs:
         """(H, W, 3) uint8 RGB input -> its boxes and scores alone (`foot` None), without running
-        the foot branch where the graph has one."""
-        session = self._boxes_only_session()
-        if session is None:
-            return dataclasses.replace(self.run(image), foot=None)
-        self._check_input(image[None])
-        boxes, scores = (np.asarray(out[0], dtype=np.float32)
-                         for out in session.run(["boxes", "scores"], {"image": image[None]}))
+        the foot branch where the graph has one (`_Sessions`)."""
+        with self._chosen() as sessions:
+            session = sessions.boxes_session()
+            if session is sessions.session:
+                found = self._run_in(session, self._outputs, image[None])
+            else:
+                found = self._run_in(session, ["boxes", "scores"], image[None])
+        boxes, scores = (np.asarray(found[i][0], dtype=np.float32) for i in (0, 1))
         return RawOutputs(boxes, scores)

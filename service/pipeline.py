@@ -114,9 +114,7 @@ class Pipeline:
                 if reference is not None and may_have_nadir(reference, self.config.view) else None)
         nadir = None if side is None else np.full((side, side, 3), self.info.pad_value, dtype=np.uint8)
         for _ in range(runs):
-            self.model.run(blank)
-            if nadir is not None:
-                self.model.run_boxes(nadir)
+            self.model.warm_up(blank, nadir)
 
     def detect(self, data: bytes, camera: FisheyeCamera, *, min_score: float | None = None,
                frame_id: str | None = None) -> DetectionResult:
@@ -128,6 +126,11 @@ class Pipeline:
         """Like `detect`, and also the decoded frame (for drawing the result on it)."""
         if min_score is not None and not 0.0 <= float(min_score) <= 1.0:
             raise ValueError(f"min_score must be within [0, 1], got {min_score}")
+        with self.model.frame():  # in flight from its decode on (the model's spinning policy)
+            return self._detect_frame(data, camera, min_score, frame_id)
+
+    def _detect_frame(self, data: bytes, camera: FisheyeCamera, min_score: float | None,
+                      frame_id: str | None) -> tuple[DetectionResult, DecodedFrame]:
         start = time.perf_counter()
         header = read_header(data)
         check_frame_size(header, self.config.max_pixels, self.config.min_frame_side_px)

@@ -163,7 +163,7 @@ def build_runner(settings: Settings, metrics: ServiceMetrics) -> InferenceRunner
     # compete with both for the same cores.
     cv2.setNumThreads(1)
     model = OnnxModel(settings.model, SessionThreads(intra_op=settings.threads, inter_op=1,
-                                                     allow_spinning=settings.onnx_spinning))
+                                                     spinning=settings.onnx_spinning))
     view = dataclasses.replace(DEFAULT_VIEW, max_pixels=settings.max_view_pixels)
     pipeline = Pipeline(model, PipelineConfig(
         nms_iou=settings.nms_iou, max_pixels=settings.max_pixels, view=view,

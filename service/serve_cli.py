@@ -11,6 +11,7 @@ from pathlib import Path
 from pydantic import ValidationError
 
 from contract import ModelError
+from contract.model import SPINNING_POLICIES
 from fisheye import CalibrationError
 from models import DEFAULT_MODEL_PATH
 from service.core.config import Settings
@@ -37,10 +38,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="camera registry: SQLite file or SQLAlchemy URL "
                              "(default ~/.local/share/fishloc/cameras.db)")
     parser.add_argument("--threads", type=int, help="inference threads (default: the container's CPU quota)")
-    parser.add_argument("--onnx-spinning", dest="onnx_spinning", action="store_const", const=True,
-                        help="onnxruntime's threads busy-wait within a frame's run instead of sleeping: "
-                             "about 20%% lower latency for one stream, about 20%% fewer frames/s for "
-                             "several at once (env FISHLOC_ONNX_SPINNING; default off)")
+    parser.add_argument("--onnx-spinning", choices=SPINNING_POLICIES,
+                        help="when onnxruntime's threads busy-wait between a run's operators instead of "
+                             "sleeping: 'alone' (the default) while a frame has the model to itself, 'on' "
+                             "in every run (several frames at once then get about 20%% fewer frames/s), "
+                             "'off' never (env FISHLOC_ONNX_SPINNING)")
     parser.add_argument("--mqtt", metavar="URL",
                         help="publish occupancy to an MQTT broker: mqtt://[user:pass@]HOST[:PORT] or "
                              "mqtts://... (with Home Assistant discovery)")

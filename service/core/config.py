@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import AliasChoices, Field, SecretStr, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
@@ -70,9 +70,9 @@ class Settings(BaseSettings):
                                                     "(its `max_view_pixels`)")
     threads: int = Field(default_factory=cpu_budget, ge=1,
                          description="inference threads (default: the CPU quota of the container)")
-    onnx_spinning: bool = Field(False, description="let onnxruntime's idle threads busy-wait within a "
-                                "run: lower latency for one frame at a time, fewer frames per second "
-                                "for several at once")
+    onnx_spinning: Literal["off", "alone", "on"] = Field(
+        "alone", description="when onnxruntime's idle threads busy-wait between a run's operators: "
+        "'alone' while a frame has the model to itself, 'on' always, 'off' never")
     max_in_flight: int | None = Field(None, ge=1,
                                       description="frames admitted at once before 503 (default 4 × threads)")
     retry_after_s: int = Field(1, ge=1, description="Retry-After of an overload answer")

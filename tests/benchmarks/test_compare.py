@@ -48,12 +48,12 @@ def test_a_model_spec_may_let_its_threads_spin() -> None:
     from benchmarks.compare import build_entry
 
     model = ROOT / "models" / "fishloc-default.onnx"
-    for spec, spinning in ((f"{model}", "0"), (f"{model}@900000,onnx_spinning=1", "1"),
-                           (f"{model}@onnx_spinning=1", "1")):
+    for spec, policy in ((f"{model}", "off"), (f"{model}@900000,onnx_spinning=on", "on"),
+                         (f"{model}@onnx_spinning=alone", "alone")):
         entry = build_entry("m", spec, 1)
-        session = entry.predictor.runner.model.session  # type: ignore[attr-defined]
-        assert session.get_session_options().get_session_config_entry(
-            "session.intra_op.allow_spinning") == spinning
+        assert entry.predictor.runner.model.threads.spinning == policy  # type: ignore[attr-defined]
+    with pytest.raises(ValueError, match="spinning"):
+        build_entry("m", f"{model}@onnx_spinning=sometimes", 1)
 
 
 def test_a_coco_file_read_in_windows_is_evaluated_and_timed_in_the_planned_view(

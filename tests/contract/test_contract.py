@@ -296,8 +296,8 @@ def test_a_view_runs_at_its_own_operating_point(tmp_path: Path, points: str, fou
     assert pipeline.point(plan.layout) == expected
 
 
-@pytest.mark.parametrize("spinning", [False, True])
-def test_the_nadir_view_runs_without_the_foot_branch(tmp_path: Path, spinning: bool) -> None:
+@pytest.mark.parametrize("spinning", ["off", "alone", "on"])
+def test_the_nadir_view_runs_without_the_foot_branch(tmp_path: Path, spinning: str) -> None:
     # `run_boxes` answers the boxes and scores of `run` and no foot (a second session of the graph
     # cut to them, whether or not the pools spin); merged with the canvas's outputs, the nadir
     # view's candidates get finite places for feet they never use.
@@ -305,13 +305,15 @@ def test_the_nadir_view_runs_without_the_foot_branch(tmp_path: Path, spinning: b
     from contract.views import PlannedInput
 
     path = save_polar_double(tmp_path / "planned.onnx", foot=True, planned=True)
-    model = OnnxModel(path, SessionThreads(1, allow_spinning=spinning))
+    model = OnnxModel(path, SessionThreads(1, spinning=spinning))
     image = np.zeros((64, 96, 3), dtype=np.uint8)
     image[20:30, 40:50] = 255
-    # the cut graph's session is made on first use
-    assert model._boxes_session is None and model._cut is not None
+    # the cut graph's session is made on first use, in the session set the run goes to (the
+    # spinning one under "alone", with nothing else in flight)
+    sessions = model._spinning if spinning == "alone" else model._sessions
+    assert sessions is not None and sessions._boxes_session is None and sessions._cut is not None
     full, boxes_only = model.run(image), model.run_boxes(image)
-    assert model._boxes_session is not None and model._cut is None
+    assert sessions._boxes_session is not None and sessions._cut is None
     assert boxes_only.foot is None and full.foot is not None
     np.testing.assert_array_equal(boxes_only.boxes, full.boxes)
     np.testing.assert_array_equal(boxes_only.scores, full.scores)
@@ -330,18 +332,23 @@ def test_the_nadir_view_runs_without_the_foot_branch(tmp_path: Path, spinning: b
 def test_warm_up_makes_the_nadir_session_only_where_the_budget_gives_the_view(tmp_path: Path) -> None:
     path = save_polar_double(tmp_path / "planned.onnx", foot=True, planned=True)
     for nadir_fraction, made in ((None, False), (0.2, True)):
-        model = OnnxModel(path, SessionThreads(1))
+        model = OnnxModel(path, SessionThreads(1, spinning="alone"))
         shapes: list[tuple[int, ...]] = []
-        run_boxes = model.run_boxes
+        run_in = model._run_in
 
-        def recording(image: np.ndarray, run_boxes: Callable[[np.ndarray], object] = run_boxes,
-                      shapes: list[tuple[int, ...]] = shapes) -> object:
-            shapes.append(image.shape)
-            return run_boxes(image)
+        def recording(session: object, outputs: list[str], images: np.ndarray,
+                      run_in: Callable[..., list[np.ndarray]] = run_in,
+                      shapes: list[tuple[int, ...]] = shapes) -> list[np.ndarray]:
+            if outputs == ["boxes", "scores"]:
+                shapes.append(images.shape)
+            return run_in(session, outputs, images)
 
-        model.run_boxes = recording  # type: ignore[method-assign]
+        model._run_in = recording  # type: ignore[method-assign]
         view = dataclasses.replace(DEFAULT_VIEW, nadir_fraction=nadir_fraction)
         Pipeline(model, PipelineConfig(view=view)).warm_up(runs=1)
-        assert (model._boxes_session is not None) is made
+        # both session sets of the "alone" policy are warmed, each at the nadir view's own size
+        assert model._spinning is not None
+        for sessions in (model._sessions, model._spinning):
+            assert (sessions._boxes_session is not None) is made
         side = nadir_side(view_reference(model.info), view)
-        assert shapes == ([(side, side, 3)] if made else [])  # warmed at the nadir view's own size
+        assert shapes == ([(1, side, side, 3)] * 2 if made else [])

@@ -1,38 +1,82 @@
-"""The onnxruntime session gets the thread counts and the spinning policy it is given."""
+"""The onnxruntime sessions get the thread counts and the spinning policy they are given."""
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
 
 from contract import OnnxModel, SessionThreads
 
 
-@pytest.mark.parametrize(("threads", "spinning"), [
-    (SessionThreads(2), "0"),                       # the default: no busy-waiting pool threads
-    (SessionThreads(1, allow_spinning=True), "1"),
+def _spins(session: Any) -> str:
+    return str(session.get_session_options().get_session_config_entry("session.intra_op.allow_spinning"))
+
+
+@pytest.mark.parametrize(("threads", "spinning", "second_set"), [
+    (SessionThreads(2), "0", False),                     # no busy-waiting pool threads
+    (SessionThreads(1, spinning="on"), "1", False),
+    (SessionThreads(1, spinning="alone"), "0", True),    # a second, spinning set for a frame alone
 ])
-def test_session_options(double_model_path: Path, threads: SessionThreads, spinning: str) -> None:
-    options = OnnxModel(double_model_path, threads).session.get_session_options()
+def test_session_options(double_model_path: Path, threads: SessionThreads, spinning: str,
+                         second_set: bool) -> None:
+    model = OnnxModel(double_model_path, threads)
+    options = model.session.get_session_options()
     assert options.intra_op_num_threads == threads.intra_op
     assert options.inter_op_num_threads == threads.inter_op
-    assert options.get_session_config_entry("session.intra_op.allow_spinning") == spinning
+    assert _spins(model.session) == spinning
     assert options.get_session_config_entry("session.inter_op.allow_spinning") == spinning
     # however they wait within a run, the pools go idle when it returns (the next frame's decode)
     assert options.get_session_config_entry("session.force_spinning_stop") == "1"
+    assert (model._spinning is not None) is second_set
+    if model._spinning is not None:
+        assert _spins(model._spinning.session) == "1"
+        assert model._spinning.session.get_session_options().intra_op_num_threads == threads.intra_op
 
 
-@pytest.mark.parametrize(("argv", "env", "spinning"), [
-    ([], {}, "0"),
-    (["--onnx-spinning"], {}, "1"),
-    ([], {"FISHLOC_ONNX_SPINNING": "1"}, "1"),
+def test_alone_spins_only_while_no_other_frame_is_in_flight(double_model_path: Path) -> None:
+    model = OnnxModel(double_model_path, SessionThreads(1, spinning="alone"))
+    used: list[str] = []
+    for sessions, name in ((model._sessions, "quiet"), (model._spinning, "spinning")):
+        assert sessions is not None
+        run = sessions.session.run
+
+        def recording(*args: Any, run: Any = run, name: str = name) -> Any:
+            used.append(name)
+            return run(*args)
+
+        sessions.session.run = recording  # type: ignore[method-assign]
+    image = model.blank_input()
+    model.run(image)                       # nothing else in flight
+    with model.frame():
+        model.run(image)                   # its own frame alone
+        with model.frame():
+            model.run(image)               # another frame in flight
+        model.run(image)                   # alone again
+    assert used == ["spinning", "spinning", "quiet", "spinning"]
+    assert (model._frames, model._runs) == (0, 0)
+    # a bad input changes nothing: the count is released with the error
+    with pytest.raises(ValueError):
+        model.run(np.zeros((3, 3, 3), np.uint8))
+    assert model._runs == 0
+
+
+def test_an_unknown_policy_is_refused() -> None:
+    with pytest.raises(ValueError, match="spinning"):
+        SessionThreads(1, spinning="sometimes")
+
+
+@pytest.mark.parametrize(("argv", "env", "spinning", "second_set"), [
+    ([], {}, "0", True),                                  # the default: "alone"
+    (["--onnx-spinning", "on"], {}, "1", False),
+    ([], {"FISHLOC_ONNX_SPINNING": "off"}, "0", False),
 ])
 def test_serve_takes_the_spinning_policy_from_its_flag_or_the_environment(
         double_model_path: Path, monkeypatch: pytest.MonkeyPatch, argv: list[str], env: dict[str, str],
-        spinning: str) -> None:
-    import argparse
-
+        spinning: str, second_set: bool) -> None:
     from service.core.metrics import ServiceMetrics
     from service.runner import build_runner
     from service.serve_cli import add_arguments, settings_from_args
@@ -44,8 +88,8 @@ def test_serve_takes_the_spinning_policy_from_its_flag_or_the_environment(
     args = parser.parse_args(["--model", str(double_model_path), "--threads", "1", *argv])
     runner = build_runner(settings_from_args(args), ServiceMetrics())
     try:
-        options = runner.pipeline.model.session.get_session_options()
-        assert options.get_session_config_entry("session.intra_op.allow_spinning") == spinning
+        model = runner.pipeline.model
+        assert _spins(model.session) == spinning and (model._spinning is not None) is second_set
     finally:
         runner.close()
 
