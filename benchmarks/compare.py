@@ -26,7 +26,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import cv2
 import numpy as np
@@ -45,6 +45,7 @@ from contract import (
 )
 from contract.detect import ContractModel, FrameOutputs
 from contract.metadata import OperatingPoint
+from contract.model import SpinningPolicy
 from contract.views import DEFAULT_VIEW
 from detector.baselines import LetterboxPredictor, RotatedCropsPredictor, TiledCocoModel
 from detector.data.readers import read_dataset
@@ -102,7 +103,7 @@ def _inference_timer(model: ContractModel, view: ViewPlanConfig) -> Callable[[by
 
 
 def _onnx_entry(name: str, path: str, threads: int, view: ViewPlanConfig = DEFAULT_VIEW,
-                spinning: str = "off") -> Entry:
+                spinning: SpinningPolicy = "off") -> Entry:
     model = OnnxModel(path, SessionThreads(intra_op=threads, spinning=spinning))
     pipeline = Pipeline(model, PipelineConfig(view=view))
     pipeline.warm_up()
@@ -181,7 +182,9 @@ def build_entry(name: str, spec: str, threads: int) -> Entry:
     file, _, view_text = spec.partition("@")
     fields = view_text.split(",") if view_text else []
     plan = [field for field in fields if not field.startswith(SPINNING)]
-    spinning = next((field.removeprefix(SPINNING) for field in fields if field.startswith(SPINNING)), "off")
+    # an unknown policy is a ValueError of SessionThreads, naming the policies
+    spinning = cast(SpinningPolicy, next(
+        (field.removeprefix(SPINNING) for field in fields if field.startswith(SPINNING)), "off"))
     if Path(file).suffix.lower() == ".onnx":
         return _onnx_entry(name, file, threads, view_from_spec(",".join(plan)) if plan else DEFAULT_VIEW,
                            spinning=spinning)

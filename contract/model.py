@@ -13,7 +13,7 @@ import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, get_args
 
 import numpy as np
 import onnxruntime as ort
@@ -25,7 +25,8 @@ FOOT_OUTPUT = "foot"
 
 
 # How a model's thread pools wait between a run's operators (`SessionThreads.spinning`).
-SPINNING_POLICIES = ("off", "alone", "on")
+SpinningPolicy = Literal["off", "alone", "on"]
+SPINNING_POLICIES: tuple[str, ...] = get_args(SpinningPolicy)
 
 
 @dataclass(frozen=True)
@@ -48,7 +49,7 @@ class SessionThreads:
 
     intra_op: int
     inter_op: int = 1
-    spinning: str = "off"
+    spinning: SpinningPolicy = "off"
 
     def __post_init__(self) -> None:
         if self.intra_op < 1 or self.inter_op < 1:
@@ -214,10 +215,11 @@ class OnnxModel:
         """The sessions a run goes to: the spinning ones where the policy is "alone" and nothing
         else is in flight (at most this run's own frame, no other run), else the model's own."""
         with self._count_lock:
-            alone = self._spinning is not None and self._frames <= 1 and self._runs == 0
+            alone = self._frames <= 1 and self._runs == 0
+            chosen = self._spinning if alone and self._spinning is not None else self._sessions
             self._runs += 1
         try:
-            yield self._spinning if alone and self._spinning is not None else self._sessions
+            yield chosen
         finally:
             with self._count_lock:
                 self._runs -= 1
@@ -272,10 +274,6 @@ class OnnxModel:
         """(H, W, 3) uint8 RGB input -> its boxes and scores alone (`foot` None), without running
         the foot branch where the graph has one (`_Sessions`)."""
         with self._chosen() as sessions:
-            session = sessions.boxes_session()
-            if session is sessions.session:
-                found = self._run_in(session, self._outputs, image[None])
-            else:
-                found = self._run_in(session, ["boxes", "scores"], image[None])
+            found = self._run_in(sessions.boxes_session(), ["boxes", "scores"], image[None])
         boxes, scores = (np.asarray(found[i][0], dtype=np.float32) for i in (0, 1))
         return RawOutputs(boxes, scores)

@@ -8,11 +8,12 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated
 
 from pydantic import AliasChoices, Field, SecretStr, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
+from contract.model import SpinningPolicy
 from fisheye.camera import MAX_VIEW_PIXELS, MIN_VIEW_PIXELS
 from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
 from service.core.cpu import cpu_budget
@@ -70,7 +71,7 @@ class Settings(BaseSettings):
                                                     "(its `max_view_pixels`)")
     threads: int = Field(default_factory=cpu_budget, ge=1,
                          description="inference threads (default: the CPU quota of the container)")
-    onnx_spinning: Literal["off", "alone", "on"] = Field(
+    onnx_spinning: SpinningPolicy = Field(
         "alone", description="when onnxruntime's idle threads busy-wait between a run's operators: "
         "'alone' while a frame has the model to itself, 'on' always, 'off' never")
     max_in_flight: int | None = Field(None, ge=1,
