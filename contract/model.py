@@ -41,8 +41,9 @@ class SessionThreads:
       (0.7.2, 2952² frames, 2 cores), and once several frames run at once their threads spin
       against each other, for about a fifth fewer frames per second;
     - "alone": a frame that has the model to itself (`OnnxModel.frame`) runs in sessions whose
-      pools spin, one that shares it in sessions whose pools sleep: the latency of "on" for one
-      stream, the throughput of "off" for several (README, "Spinning inference threads").
+      pools spin on all `intra_op` threads; a frame that shares it, in sessions of half the
+      threads whose pools sleep: the latency of "on" for one stream, and more frames per second
+      than "off" for several (README, "Spinning inference threads").
     Whichever, pools stop spinning as soon as a run returns (`session.force_spinning_stop`), so
     they never take the CPU from the next frame's decode.
     """
@@ -122,9 +123,10 @@ def _boxes_only(data: bytes) -> bytes:
     return bytes(Extractor(model).extract_model(["image"], ["boxes", "scores"]).SerializeToString())
 
 
-def _session_options(threads: SessionThreads, spinning: bool) -> ort.SessionOptions:
+def _session_options(threads: SessionThreads, spinning: bool, intra_op: int | None = None
+                     ) -> ort.SessionOptions:
     options = ort.SessionOptions()
-    options.intra_op_num_threads = threads.intra_op
+    options.intra_op_num_threads = intra_op or threads.intra_op
     options.inter_op_num_threads = threads.inter_op
     options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
     options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
@@ -172,7 +174,11 @@ class OnnxModel:
         if not self.path.is_file():
             raise ModelError(f"model file {self.path} does not exist")
         data = self.path.read_bytes()
-        options = _session_options(threads, spinning=threads.spinning == "on")
+        # Under "alone" the model's own sessions serve frames that overlap: each gets half the
+        # threads, sleeping, so that two frames at once share the cores without waking each
+        # other's pools (on 2 cores one thread each, no wake-ups at all).
+        shared = max(1, threads.intra_op // 2) if threads.spinning == "alone" else threads.intra_op
+        options = _session_options(threads, spinning=threads.spinning == "on", intra_op=shared)
         try:
             self.session = ort.InferenceSession(
                 data, sess_options=options, providers=["CPUExecutionProvider"]

@@ -16,16 +16,19 @@ def _spins(session: Any) -> str:
     return str(session.get_session_options().get_session_config_entry("session.intra_op.allow_spinning"))
 
 
-@pytest.mark.parametrize(("threads", "spinning", "second_set"), [
-    (SessionThreads(2), "0", False),                     # no busy-waiting pool threads
-    (SessionThreads(1, spinning="on"), "1", False),
-    (SessionThreads(1, spinning="alone"), "0", True),    # a second, spinning set for a frame alone
+@pytest.mark.parametrize(("threads", "spinning", "second_set", "own_threads"), [
+    (SessionThreads(2), "0", False, 2),                  # no busy-waiting pool threads
+    (SessionThreads(1, spinning="on"), "1", False, 1),
+    # a second, spinning set on all threads for a frame alone; frames that overlap get half each
+    (SessionThreads(2, spinning="alone"), "0", True, 1),
+    (SessionThreads(4, spinning="alone"), "0", True, 2),
+    (SessionThreads(1, spinning="alone"), "0", True, 1),
 ])
 def test_session_options(double_model_path: Path, threads: SessionThreads, spinning: str,
-                         second_set: bool) -> None:
+                         second_set: bool, own_threads: int) -> None:
     model = OnnxModel(double_model_path, threads)
     options = model.session.get_session_options()
-    assert options.intra_op_num_threads == threads.intra_op
+    assert options.intra_op_num_threads == own_threads
     assert options.inter_op_num_threads == threads.inter_op
     assert _spins(model.session) == spinning
     assert options.get_session_config_entry("session.inter_op.allow_spinning") == spinning
