@@ -15,7 +15,7 @@ is chosen on the `--choose` set alone, the validation renders: the real frames o
   are mapped piecewise-linearly so that its threshold lands on the view's (a monotone rescale, so
   the view's one threshold and AP's ranking then see every part alike).
 
-The README's "Post-processing designs" figures come from:
+The figures of docs/DETECTOR.md's "Post-processing designs" come from:
 
     python -m benchmarks.post_designs --model runs/v072.onnx --choose data/val1024/annotations.json \\
         --data lunch3=../shared/real-frames/cepdof_lunch3.json \\

@@ -4,7 +4,7 @@ Each design is a way to build the model's input (the fixed strip, or a planned v
 `ViewPlanConfig`); each is scored with `fishloc eval`'s metrics on every set given (the real check
 frames and the renders together: a design that gains on one set and loses on the others is tuned
 to a room), and the input's cost is reported beside it as the planned pixels against the trained
-strip's. The figures of the README's "View planning" table come from this command:
+strip's. The figures of docs/DETECTOR.md's "Planned views" table come from this command:
 
     python -m benchmarks.view_designs --model models/fishloc-default.onnx \\
         --data lunch3=../shared/real-frames/cepdof_lunch3.json \\

@@ -134,7 +134,7 @@ def fused_feet(mapping: InputMapping, boxes: FloatArray, scores: FloatArray, fee
     0.263 -> 0.254 m); since the foot refiner (0.4.0) the mean is worse than each detection's own
     foot (0.6.2 on the validation renders: 0.163 against 0.159 m), as one cell that reads a
     neighbour's feet pulls it. The median leaves such a cell out: 0.157 m there, and 0.162 -> 0.159 m
-    on the unseen renders (README, "Foot point"). Boxes are not fused: that lowered real-frame AP75
+    on the unseen renders (docs/DETECTOR.md, "Foot point"). Boxes are not fused: that lowered real-frame AP75
     from 0.19 to 0.01. A view without a cheap IoU (the letterboxed fisheye view) keeps each
     detection's own foot."""
     overlap = mapping.overlaps(boxes, candidate_boxes) if len(boxes) else None
@@ -179,7 +179,7 @@ def nadir_feet(boxes: FloatArray, principal_point: tuple[float, float]) -> Float
     validation renders with the nadir view (`--max-view-pixels 1000000`) the box side put those
     people 0.19 m too near the nadir on average, the centre 0.18 m too far; the midpoint takes the
     view's mean position error from 0.162 to 0.156 m (fractions 0.4–0.6 are within 0.001 m of it),
-    and on the unseen renders from 0.166 to 0.158 m (README, "Foot point")."""
+    and on the unseen renders from 0.166 to 0.158 m (docs/DETECTOR.md, "Foot point")."""
     side = foot_points(boxes, principal_point).reshape(-1, 2)
     return side + NADIR_FOOT_TOWARD_CENTRE * (np.asarray(boxes, dtype=np.float64)[:, :2] - side)
 

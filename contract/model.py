@@ -143,7 +143,7 @@ class _Sessions:
     (`run_boxes`) in a second one, made on first use: only a view with the nadir view needs it.
     A planned model's nadir view places its people by the box side, and onnxruntime runs every
     node of a graph whatever outputs are asked for: the cut skips the foot branch there (17
-    against 29 ms for the 448 px crop, README "The nadir view ..."). Where there is nothing to
+    against 29 ms for the 448 px crop, docs/DETECTOR.md "The nadir view ..."). Where there is nothing to
     skip, or onnx cannot cut the graph, the full session serves."""
 
     def __init__(self, session: ort.InferenceSession, cut: tuple[bytes, ort.SessionOptions] | None) -> None:

@@ -372,7 +372,7 @@ NADIR_EDGE_PX = 2.0  # a nadir-view box this near the crop's edge is a person th
 # The nadir view may upsample a reduced decode up to this factor rather than make the frame's decode
 # larger: a 2952 px frame decoded at full size costs 40 ms more end to end than at half size (its
 # nadir view then upsamples 1.1x). At 2x, Lunch3's nadir view (1.6x) brought two false people:
-# precision 0.95 -> 0.87 (README, "The nadir view and a faster graph").
+# precision 0.95 -> 0.87 (docs/DETECTOR.md, "The nadir view and a faster graph").
 NADIR_DECODE_SLACK = 1.5
 
 

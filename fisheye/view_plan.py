@@ -81,14 +81,14 @@ class ViewPlanConfig:
     floor_theta_deg: float = 80.0  # people are planned for up to this angle from the axis (17 m at 3 m)
     # Each band shows this many standing adults' lengths (at the split) past the radii it reports,
     # so a person centred there is whole in it; None: the inner band shows the whole disc. 0.6 was
-    # chosen over the whole disc on the real and rendered sets together (README, "View planning").
+    # chosen over the whole disc on the real and rendered sets together (docs/DETECTOR.md, "Planned views").
     band_margin: float | None = 0.6
     # The trained strip (745 472 px) and the nadir view (384 x 384 px): 0.5.0's latency end to end
     # with 0.7.0's lighter foot branch (0.97-0.99x its time at 2952², 0.98x at 2048² and 1080²;
-    # README, "A lighter foot neck"); 800 000, the strip alone, from 0.6.1 to 0.6.2.
+    # docs/DETECTOR.md, "A lighter foot neck"); 800 000, the strip alone, from 0.6.1 to 0.6.2.
     max_pixels: int = 900_000
     gap_rows: int = STRIDE
-    # The nadir view (module docstring; README, "The nadir view and a faster graph"): the people it
+    # The nadir view (module docstring; docs/DETECTOR.md, "The nadir view and a faster graph"): the people it
     # reports, what it shows (fractions of the image circle's radius) and its scale over the strip's
     # radial one; None: none. 0.35 was chosen over 0.25 and 0.3 on the real and rendered sets
     # together; of the scales, 1.5 (448 px) found the most below the lens, 1.25 (384 px; recall
@@ -104,13 +104,13 @@ class ViewPlanConfig:
     # further out (the nadir view's pixels kept aside), as long as it reports at least this
     # fraction of the view's radius; then it steps down the scales. None (the default): it steps
     # down at once. Narrowing found more of the renders' far people at 1.4M-1.6M px but not more
-    # of the real frames' (README, "The rim band narrowed to fit a budget"): a design, not the rule.
+    # of the real frames' (docs/DETECTOR.md, "The rim band narrowed to fit a budget"): a design, not the rule.
     min_outer_fraction: float | None = None
     # The outer band's rows at this scale over the trained strip while its columns keep the band's
     # scale: the rim widened across the ray alone, where a person's width, not length, is what the
     # network misses (8 px across against 27 along at the default budget). Widened alone, the rim
     # found more of the renders' far people and lost most of the real frames' people it reports
-    # (README, "The rim band widened across the ray alone"): a design, not the rule. None (the
+    # (docs/DETECTOR.md, "The rim band widened across the ray alone"): a design, not the rule. None (the
     # default): the outer band is scaled alike on both axes, people keep the shape the network learnt.
     outer_row_scale: float | None = None
 

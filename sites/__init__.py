@@ -26,7 +26,7 @@ tracks are rebuilt in capture_time order), later than that they are dropped and 
 
 Seam for several processes: `SiteTracker` holds all of a site's state and takes plain, picklable
 `SiteObservation`s, so fusion can sit behind a queue or an RPC that carries them from detection
-replicas, as long as all of one site's frames reach one tracker (README, "More than one machine").
+replicas, as long as all of one site's frames reach one tracker (README, "Sites across replicas").
 """
 
 from sites.fusion import TrackerConfig

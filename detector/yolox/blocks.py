@@ -87,7 +87,7 @@ class Focus(nn.Module):
     Both steps together are one convolution of the image with a 2k x 2k kernel at stride 2 (YOLOv5
     runs its Focus so): the same sums, and what `forward` runs (images of even sides). In onnxruntime
     it costs 0.6x the slices, the channel concatenation and the k x k conv on the 2x2 blocks
-    (10.8 against 17.7 ms on a 416 x 1792 strip, the stem with its SiLU; README, "The nadir view and
+    (10.8 against 17.7 ms on a 416 x 1792 strip, the stem with its SiLU; docs/DETECTOR.md, "The nadir view and
     a faster graph")."""
 
     def __init__(self, in_channels: int, out_channels: int, kernel_size: int = 3) -> None:

@@ -25,7 +25,7 @@ one strip row spans at the target (`metres_per_px`), so far people, with few pix
 count in metres, not pixels. The weight stops at `MAX_METRES_PER_PX`: near the horizon one row
 spans half a metre and more, where a person's feet are a pixel or two and their error is mostly
 noise no offset can learn; uncapped, those few people outweighed the near ones twenty to one and
-the near band, where most people stand, hardly learnt (measured: README, "Foot point").
+the near band, where most people stand, hardly learnt (measured: docs/DETECTOR.md, "Foot point").
 """
 
 from __future__ import annotations

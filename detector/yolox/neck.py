@@ -22,7 +22,7 @@ class TopDownFPN(nn.Module):
     """The top-down path of `PAFPN` alone (its module names): backbone features (strides 8, 16, 32)
     -> its stride-8 output, its stride-16 one and the stride-32 backbone feature, the shapes of
     `PAFPN`'s outputs at a fraction of its cost (the bottom-up path is 41 % of it). The foot branch
-    reads it where `YoloxConfig.foot_neck_top_down` (README, "A lighter foot neck")."""
+    reads it where `YoloxConfig.foot_neck_top_down` (docs/DETECTOR.md, "A lighter foot neck")."""
 
     def __init__(self, channels: tuple[int, int, int], depth: int, depthwise: bool) -> None:
         super().__init__()

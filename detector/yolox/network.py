@@ -40,7 +40,7 @@ class YoloxConfig:
     foot_refine: bool = False  # and its second stage on the stride-8 features (FootRefiner)
     foot_refine_steps: int = 1  # passes of that stage, each about the previous one's point
     foot_neck: bool = False  # the foot branch reads its own copy of the neck (FootNeck)
-    # ... of its top-down path alone (neck.TopDownFPN; README, "A lighter foot neck")
+    # ... of its top-down path alone (neck.TopDownFPN; docs/DETECTOR.md, "A lighter foot neck")
     foot_neck_top_down: bool = False
 
     def __post_init__(self) -> None:
