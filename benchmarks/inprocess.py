@@ -57,7 +57,7 @@ def staged_detect(pipeline: Pipeline, data: bytes, camera: FisheyeCamera,
     frame_camera = camera.scaled_to(header.size_wh)
     frame = decode_frame(data, min_decoded_side(info, frame_camera, view), pipeline.config.max_pixels, header)
     decoded, decoded_cpu = time.perf_counter(), time.thread_time()
-    images, mapping = view_inputs(info, frame.rgb, frame_camera, view)
+    images, mapping = view_inputs(info, frame.rgb, frame_camera, view, pipeline.model.frame_threads())
     preprocessed = time.perf_counter()
     raw = run_view(pipeline.model, images, mapping)
     inferred = time.perf_counter()

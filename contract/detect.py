@@ -214,13 +214,16 @@ def run_view(model: ContractModel, images: Sequence[NDArray[np.uint8]], mapping:
 
 
 def view_inputs(info: ModelInfo, rgb: NDArray[np.uint8], camera: FisheyeCamera,
-                config: ViewPlanConfig = DEFAULT_VIEW) -> tuple[list[NDArray[np.uint8]], InputMapping]:
+                config: ViewPlanConfig = DEFAULT_VIEW, workers: int = 1
+                ) -> tuple[list[NDArray[np.uint8]], InputMapping]:
     """Every input a frame of `camera` (decoded as `rgb`, full or reduced scale) makes for the
     model, each one run, and the mapping of their merged outputs (`merge_outputs`): the view's
-    input (`views.prepare_input`), then its nadir view where the plan has one."""
-    image, mapping = prepare_input(info, rgb, camera, config)
+    input (`views.prepare_input`, its unwrap on `workers` threads), then its nadir view where the
+    plan has one."""
+    image, mapping = prepare_input(info, rgb, camera, config, workers)
     if isinstance(mapping, PlannedInput) and mapping.plan.nadir is not None:
-        return [image, nadir_input(mapping.plan.nadir, rgb, camera.image_size, info.pad_value)], mapping
+        nadir = nadir_input(mapping.plan.nadir, rgb, camera.image_size, info.pad_value, workers)
+        return [image, nadir], mapping
     return [image], mapping
 
 

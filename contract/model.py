@@ -216,6 +216,13 @@ class OnnxModel:
             with self._count_lock:
                 self._frames -= 1
 
+    def frame_threads(self) -> int:
+        """The threads a frame's own work beside inference (its unwrap) may take now: every
+        `intra_op` thread while at most that frame is in flight (`frame`), one while frames overlap,
+        so that the cores a lone frame leaves idle serve it and overlapping frames do not fight."""
+        with self._count_lock:
+            return self.threads.intra_op if self._frames <= 1 else 1
+
     @contextlib.contextmanager
     def _chosen(self) -> Iterator[_Sessions]:
         """The sessions a run goes to: the spinning ones where the policy is "alone" and nothing

@@ -233,10 +233,11 @@ def _cached_maps(grid: PolarGrid, scale_xy: tuple[float, float]) -> tuple[NDArra
 
 
 def prepare_input(info: ModelInfo, rgb: NDArray[np.uint8], camera: FisheyeCamera,
-                  config: ViewPlanConfig = DEFAULT_VIEW) -> tuple[NDArray[np.uint8], InputMapping]:
+                  config: ViewPlanConfig = DEFAULT_VIEW, workers: int = 1
+                  ) -> tuple[NDArray[np.uint8], InputMapping]:
     """A frame of `camera` (scaled to the frame's full size), decoded as `rgb` (h, w, 3) at full or
     reduced scale -> the model's input (H, W, 3) uint8 and the mapping of its px to the frame's
-    (a planned model's view planned with `config`)."""
+    (a planned model's view planned with `config`; a polar unwrap on `workers` threads)."""
     frame_wh = camera.image_size
     decoded_wh = (rgb.shape[1], rgb.shape[0])
     if info.polar is None:
@@ -248,10 +249,10 @@ def prepare_input(info: ModelInfo, rgb: NDArray[np.uint8], camera: FisheyeCamera
     if info.planned:
         plan = view_plan(info, camera, config)
         map_u, map_v = _cached_canvas_maps(plan, scale_xy)
-        return unwrap_with_maps(rgb, map_u, map_v, info.pad_value), PlannedInput(plan)
+        return unwrap_with_maps(rgb, map_u, map_v, info.pad_value, workers), PlannedInput(plan)
     grid = polar_grid(info, camera)
     map_u, map_v = _cached_maps(grid, scale_xy)
-    return unwrap_with_maps(rgb, map_u, map_v, info.pad_value), PolarInput(grid)
+    return unwrap_with_maps(rgb, map_u, map_v, info.pad_value, workers), PolarInput(grid)
 
 
 @dataclass(frozen=True)
@@ -397,11 +398,12 @@ def upright_to_radius_aligned(nadir: NadirPiece, xyxy: NDArray[np.floating]) -> 
 
 
 def nadir_input(nadir: NadirPiece, rgb: NDArray[np.uint8], frame_wh: tuple[int, int],
-                pad_value: int) -> NDArray[np.uint8]:
-    """The nadir view `nadir` of a frame of `frame_wh` px decoded as `rgb` (full or reduced scale)."""
+                pad_value: int, workers: int = 1) -> NDArray[np.uint8]:
+    """The nadir view `nadir` of a frame of `frame_wh` px decoded as `rgb` (full or reduced scale),
+    sampled on `workers` threads."""
     scale_xy = (rgb.shape[1] / frame_wh[0], rgb.shape[0] / frame_wh[1])
     map_u, map_v = _cached_nadir_maps(nadir, scale_xy)
-    return unwrap_with_maps(rgb, map_u, map_v, pad_value)
+    return unwrap_with_maps(rgb, map_u, map_v, pad_value, workers)
 
 
 @functools.lru_cache(maxsize=32)

@@ -25,7 +25,10 @@ read back the way its labels were made).
 
 from __future__ import annotations
 
+import functools
+import itertools
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -197,12 +200,37 @@ class PolarGrid:
 
 
 def unwrap_with_maps(image: NDArray[np.uint8], map_u: NDArray[Any], map_v: NDArray[Any],
-                     border_value: int = 0) -> NDArray[np.uint8]:
+                     border_value: int = 0, workers: int = 1) -> NDArray[np.uint8]:
     """Sample `image` at precomputed `sampling_maps` (bilinear; outside the image: `border_value`),
-    float or as `cv2.convertMaps` makes them fixed-point."""
+    float or as `cv2.convertMaps` makes them fixed-point. With `workers` > 1 the output's rows are
+    split into that many blocks, remapped at once on as many threads (OpenCV releases the GIL), the
+    same pixels as one call: for a frame that has the cores to itself (the service keeps OpenCV's
+    own pool at one thread, `service.runner`)."""
     import cv2
 
     channels = 1 if image.ndim == 2 else image.shape[2]
-    strip = cv2.remap(image, map_u, map_v, interpolation=cv2.INTER_LINEAR,
-                      borderMode=cv2.BORDER_CONSTANT, borderValue=(border_value,) * channels)
-    return np.asarray(strip, dtype=np.uint8)
+    border = (border_value,) * channels
+    rows = map_u.shape[0]
+    if workers <= 1 or rows < 2 * workers:
+        strip = cv2.remap(image, map_u, map_v, interpolation=cv2.INTER_LINEAR,
+                          borderMode=cv2.BORDER_CONSTANT, borderValue=border)
+        return np.asarray(strip, dtype=np.uint8)
+    out = np.empty((rows, map_u.shape[1], *image.shape[2:]), dtype=np.uint8)
+    bounds = np.linspace(0, rows, workers + 1).round().astype(int)
+
+    def block(lo: int, hi: int) -> None:
+        cv2.remap(image, map_u[lo:hi], map_v[lo:hi], interpolation=cv2.INTER_LINEAR,
+                  dst=out[lo:hi], borderMode=cv2.BORDER_CONSTANT, borderValue=border)
+
+    first, *others = itertools.pairwise(bounds.tolist())
+    pending = [_remap_pool(workers - 1).submit(block, lo, hi) for lo, hi in others]
+    block(*first)
+    for future in pending:
+        future.result()
+    return out
+
+
+@functools.lru_cache(maxsize=8)
+def _remap_pool(threads: int) -> ThreadPoolExecutor:
+    """The helper threads of a split remap (`unwrap_with_maps`), made once per count."""
+    return ThreadPoolExecutor(max_workers=threads, thread_name_prefix="fishloc-remap")

@@ -146,7 +146,7 @@ class Pipeline:
         frame = decode_frame(data, smallest_side, self.config.max_pixels, header)
         decoded = time.perf_counter()
 
-        images, mapping = view_inputs(self.info, frame.rgb, frame_camera, view)
+        images, mapping = view_inputs(self.info, frame.rgb, frame_camera, view, self.model.frame_threads())
         preprocessed = time.perf_counter()
 
         raw = run_view(self.model, images, mapping)

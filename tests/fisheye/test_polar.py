@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fisheye import foot_points
-from fisheye.polar import PolarGrid
+from fisheye.polar import PolarGrid, unwrap_with_maps
 
 GRID = PolarGrid(principal_point=(511.5, 500.0), radius_px=480.0, height=96, width=384, overlap=32)
 
@@ -99,6 +99,28 @@ def test_unwrap_samples_the_frame_where_the_maps_say() -> None:
     half = cv2.resize(frame, (512, 500), interpolation=cv2.INTER_AREA)
     strip_half = GRID.unwrap(half, scale_xy=(0.5, 0.5))
     assert np.abs(strip_half.astype(int) - strip.astype(int)).mean() < 3
+
+
+@pytest.mark.parametrize("workers", [2, 3, 7])
+@pytest.mark.parametrize("fixed_point", [False, True])
+@pytest.mark.parametrize("channels", [1, 3])
+def test_a_split_unwrap_is_the_same_pixels_as_one_call(workers: int, fixed_point: bool,
+                                                      channels: int) -> None:
+    rng = np.random.default_rng(1)
+    frame = rng.integers(0, 255, (1000, 1024, channels), dtype=np.uint8).squeeze()
+    map_u, map_v = GRID.sampling_maps((1.0, 1.0))
+    maps = cv2.convertMaps(map_u, map_v, cv2.CV_16SC2) if fixed_point else (map_u, map_v)
+    whole = unwrap_with_maps(frame, *maps, border_value=7)
+    split = unwrap_with_maps(frame, *maps, border_value=7, workers=workers)
+    assert split.shape == whole.shape == (96, 416, *frame.shape[2:])
+    assert split.dtype == np.uint8 and np.array_equal(split, whole)
+    assert (whole == 7).any()  # the border value reaches the blocks too (the ring passes the frame)
+
+
+def test_an_unwrap_of_fewer_rows_than_two_per_worker_is_one_call() -> None:
+    frame = np.arange(64 * 64 * 3, dtype=np.uint8).reshape(64, 64, 3)
+    map_u, map_v = np.meshgrid(np.arange(8, dtype=np.float32), np.arange(3, dtype=np.float32))
+    assert np.array_equal(unwrap_with_maps(frame, map_u, map_v, workers=2), frame[:3, :8])
 
 
 @pytest.mark.parametrize("kwargs", [dict(height=0), dict(width=0), dict(overlap=-1),

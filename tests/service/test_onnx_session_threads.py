@@ -100,3 +100,39 @@ def test_serve_takes_the_spinning_policy_from_its_flag_or_the_environment(
 def test_thread_counts_must_be_positive() -> None:
     with pytest.raises(ValueError):
         SessionThreads(0)
+
+
+def test_a_frame_alone_gets_every_thread_for_its_unwrap(double_model_path: Path) -> None:
+    model = OnnxModel(double_model_path, SessionThreads(2))
+    assert model.frame_threads() == 2                  # nothing in flight
+    with model.frame():
+        assert model.frame_threads() == 2              # its own frame alone
+        with model.frame():
+            assert model.frame_threads() == 1          # frames overlap: one thread each
+        assert model.frame_threads() == 2
+    assert OnnxModel(double_model_path, SessionThreads(1)).frame_threads() == 1
+
+
+def test_the_pipeline_unwraps_on_the_threads_the_model_gives_a_frame(
+        double_model_path: Path, demo_camera: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    import cv2
+
+    import service.pipeline as pipeline_module
+    from service.pipeline import Pipeline
+
+    pipeline = Pipeline(OnnxModel(double_model_path, SessionThreads(2)))
+    asked: list[int] = []
+
+    def recording(*args: Any) -> Any:
+        asked.append(args[4])
+        return real(*args)
+
+    real = pipeline_module.view_inputs
+    monkeypatch.setattr(pipeline_module, "view_inputs", recording)
+    width, height = demo_camera.image_size
+    ok, jpeg = cv2.imencode(".jpg", np.zeros((height, width, 3), np.uint8))
+    assert ok
+    pipeline.detect(jpeg.tobytes(), demo_camera)
+    with pipeline.model.frame():                       # another frame in flight
+        pipeline.detect(jpeg.tobytes(), demo_camera)
+    assert asked == [2, 1]
