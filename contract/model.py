@@ -123,10 +123,9 @@ def _boxes_only(data: bytes) -> bytes:
     return bytes(Extractor(model).extract_model(["image"], ["boxes", "scores"]).SerializeToString())
 
 
-def _session_options(threads: SessionThreads, spinning: bool, intra_op: int | None = None
-                     ) -> ort.SessionOptions:
+def _session_options(threads: SessionThreads, spinning: bool, intra_op: int) -> ort.SessionOptions:
     options = ort.SessionOptions()
-    options.intra_op_num_threads = intra_op or threads.intra_op
+    options.intra_op_num_threads = intra_op
     options.inter_op_num_threads = threads.inter_op
     options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
     options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
@@ -196,7 +195,7 @@ class OnnxModel:
         # to itself; `_frames` and `_runs` count what is in flight (`frame`, `_chosen`).
         self._spinning: _Sessions | None = None
         if threads.spinning == "alone":
-            spin = _session_options(threads, spinning=True)
+            spin = _session_options(threads, spinning=True, intra_op=threads.intra_op)
             self._spinning = _Sessions(
                 ort.InferenceSession(data, sess_options=spin, providers=["CPUExecutionProvider"]),
                 (data, spin) if cuts else None)

@@ -211,7 +211,7 @@ def unwrap_with_maps(image: NDArray[np.uint8], map_u: NDArray[Any], map_v: NDArr
     channels = 1 if image.ndim == 2 else image.shape[2]
     border = (border_value,) * channels
     rows = map_u.shape[0]
-    if workers <= 1 or rows < 2 * workers:
+    if workers <= 1 or rows < workers:  # every block at least one row
         strip = cv2.remap(image, map_u, map_v, interpolation=cv2.INTER_LINEAR,
                           borderMode=cv2.BORDER_CONSTANT, borderValue=border)
         return np.asarray(strip, dtype=np.uint8)

@@ -117,10 +117,12 @@ def test_a_split_unwrap_is_the_same_pixels_as_one_call(workers: int, fixed_point
     assert (whole == 7).any()  # the border value reaches the blocks too (the ring passes the frame)
 
 
-def test_an_unwrap_of_fewer_rows_than_two_per_worker_is_one_call() -> None:
+@pytest.mark.parametrize("workers", [3, 4, 7])
+def test_an_unwrap_of_as_many_rows_as_workers_or_fewer(workers: int) -> None:
+    # no block is left without rows (OpenCV refuses an empty map)
     frame = np.arange(64 * 64 * 3, dtype=np.uint8).reshape(64, 64, 3)
     map_u, map_v = np.meshgrid(np.arange(8, dtype=np.float32), np.arange(3, dtype=np.float32))
-    assert np.array_equal(unwrap_with_maps(frame, map_u, map_v, workers=2), frame[:3, :8])
+    assert np.array_equal(unwrap_with_maps(frame, map_u, map_v, workers=workers), frame[:3, :8])
 
 
 @pytest.mark.parametrize("kwargs", [dict(height=0), dict(width=0), dict(overlap=-1),
