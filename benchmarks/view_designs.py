@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from contract import ModelError, ModelRunner, OnnxModel, SessionThreads
+from contract.detect import ContractModel
 from contract.metadata import OperatingPoint
 from contract.views import DEFAULT_VIEW, view_plan
 from fisheye.view_plan import ViewPlanConfig
@@ -72,7 +73,7 @@ DESIGNS: dict[str, ViewPlanConfig] = {
 FIGURES = ("AP50", "precision", "recall", "AP_far", "recall_nadir", "mPE", "mPE_reported")
 
 
-def evaluate_design(model: OnnxModel, view: ViewPlanConfig, frames: Sequence[Any],
+def evaluate_design(model: ContractModel, view: ViewPlanConfig, frames: Sequence[Any],
                     point: OperatingPoint | None = None) -> dict[str, Any]:
     """`fishloc eval`'s metrics of `model` on `frames` with views planned by `view`, and the mean
     cost ratio of the plans (pixels against the trained strip); at `point` where given, else at
@@ -85,6 +86,46 @@ def evaluate_design(model: OnnxModel, view: ViewPlanConfig, frames: Sequence[Any
     costs = [view_plan(model.info, frame_camera(frame), view).cost_ratio for frame in frames]
     chosen = {} if point is None else {"min_score": point.min_score, "nms_iou": point.nms_iou}
     return {**{k: metrics.get(k) for k in FIGURES}, "cost_ratio": sum(costs) / len(costs), **chosen}
+
+
+def read_sets(items: Sequence[str], limit: int | None) -> dict[str, list[Any]]:
+    """`--data NAME=ANNOTATIONS` items -> each set's first `limit` frames by name; ValueError for an
+    item without a name, DatasetFormatError for a file that cannot be read."""
+    from detector.data.readers import read_dataset
+
+    sets: dict[str, list[Any]] = {}
+    for item in items:
+        name, _, path = item.partition("=")
+        if not name or not path:
+            raise ValueError(f"--data wants NAME=ANNOTATIONS, got {item!r}")
+        sets[name] = list(read_dataset(path))[:limit]
+    return sets
+
+
+def chosen_point(model: ContractModel, frames: Sequence[Any], view: ViewPlanConfig) -> OperatingPoint:
+    """The best-F1 operating point of `model` on validation `frames` in the views `view` plans
+    (`fishloc eval --operating-point`)."""
+    from detector.evaluate import choose_operating_point
+
+    best = choose_operating_point(model, frames, view=view)[0]
+    return OperatingPoint(best.min_score, best.nms_iou)
+
+
+def design_figures(design: str, model: ContractModel, view: ViewPlanConfig, sets: dict[str, list[Any]],
+                   choose_on: Sequence[Any] | None) -> dict[str, dict[str, Any]]:
+    """`evaluate_design` on every set, at the point chosen on `choose_on` (None: the model's own for
+    each layout); the figures also go to stderr as one JSON line as soon as they are made."""
+    point = None if choose_on is None else chosen_point(model, choose_on, view)
+    figures = {name: evaluate_design(model, view, frames, point) for name, frames in sets.items()}
+    print(json.dumps({design: figures}), file=sys.stderr, flush=True)
+    return figures
+
+
+def report(results: dict[str, dict[str, dict[str, Any]]], json_path: Path | None) -> None:
+    """The designs' table on stdout and, where asked, every figure as JSON."""
+    print(markdown_table(results))
+    if json_path is not None:
+        json_path.write_text(json.dumps(results, indent=2) + "\n")
 
 
 def cell(value: Any) -> str:
@@ -133,12 +174,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not model.info.planned:
             raise ModelError(f"{args.model} is not a planned model (fishloc export --planned)")
         choose_on = None if args.choose is None else read_dataset(args.choose)[:args.limit]
-        sets = {}
-        for item in args.data:
-            name, _, path = item.partition("=")
-            if not path:
-                raise ValueError(f"--data wants NAME=ANNOTATIONS, got {item!r}")
-            sets[name] = read_dataset(path)[:args.limit]
+        sets = read_sets(args.data, args.limit)
     except (ModelError, DatasetFormatError, ValueError) as error:
         print(f"view_designs: {error}", file=sys.stderr)
         return 2
@@ -146,17 +182,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     for design, view in DESIGNS.items():
         if args.design is not None and design not in args.design:
             continue
-        point = None
-        if choose_on is not None:
-            from detector.evaluate import choose_operating_point
-
-            best = choose_operating_point(model, choose_on, view=view)[0]
-            point = OperatingPoint(best.min_score, best.nms_iou)
-        results[design] = {name: evaluate_design(model, view, frames, point) for name, frames in sets.items()}
-        print(json.dumps({design: results[design]}), file=sys.stderr, flush=True)
-    print(markdown_table(results))
-    if args.json is not None:
-        args.json.write_text(json.dumps(results, indent=2) + "\n")
+        results[design] = design_figures(design, model, view, sets, choose_on)
+    report(results, args.json)
     return 0
 
 
