@@ -13,9 +13,12 @@ together). The designs:
   and class logits (`logits`), as their weighted geometric mean (`geometric`) or as their weighted
   mean (`mean`) of the two heads' person probabilities. WiSE-FT (`detector/yolox/wise.py`) mixes the
   two heads in weight space instead; the ensemble costs a second head per level.
+- `coco:PARTS`: the fine-tuned head with the parts named (`+`-joined, of HEAD_PARTS: e.g.
+  `cls_convs+cls_preds`, the class branch, which YOLOX multiplies with the box branch's objectness)
+  put back to the COCO head's weights, every other weight as trained: a graft, at no cost.
 - `foot-passes:N`: the foot refiner run N times, each pass about the previous pass's point.
 
-The figures of docs/DETECTOR.md's "Two heads at once, and the foot refiner run again" come from:
+The figures of docs/DETECTOR.md's "The trained head read otherwise" come from:
 
     python -m benchmarks.head_designs --checkpoint models/fishloc-default.pt \\
         --choose data/val1024/annotations.json --data lunch3=../shared/real-frames/cepdof_lunch3.json \\
@@ -39,9 +42,11 @@ from benchmarks.view_designs import design_figures, read_sets, report
 from contract.views import DEFAULT_VIEW
 from detector.yolox.head import OBJECTNESS, YoloxHead
 
-DEFAULT_DESIGNS = ("as-trained", "logits:0.5", "geometric:0.5", "geometric:0.7", "mean:0.5", "foot-passes:2",
-                   "foot-passes:3")
+DEFAULT_DESIGNS = ("as-trained", "logits:0.5", "geometric:0.5", "geometric:0.7", "mean:0.5",
+                   "coco:cls_preds", "coco:cls_convs+cls_preds", "coco:stems+cls_convs+cls_preds",
+                   "foot-passes:2", "foot-passes:3")
 COMBINATIONS = ("logits", "geometric", "mean")
+HEAD_PARTS = ("stems", "cls_convs", "cls_preds", "reg_convs", "reg_preds", "obj_preds")  # `YoloxHead`'s
 PROBABILITY_FLOOR = 1e-7  # person probabilities are clamped to [floor, 1 − floor] before their logit
 CERTAIN_LOGIT = 30.0  # the class logit of a combined map: p(person) 1, the score is all in objectness
 
@@ -105,6 +110,17 @@ def design_module(checkpoint: Any, design: str, pretrained: str) -> nn.Module:
     kind, _, value = design.partition(":")
     if kind == "as-trained" and not value:
         return module
+    if kind == "coco":
+        parts = value.split("+")
+        unknown = [part for part in parts if part not in HEAD_PARTS]
+        if unknown or not value:
+            raise ValueError(f"{design}: head parts are {'+'.join(HEAD_PARTS)}, got {value!r}")
+        coco_state = init_network_from_pretrained(pretrained, checkpoint.config).state_dict()
+        state = network.state_dict()
+        state.update({name: coco_state[name] for name in state
+                      if name.startswith(tuple(f"head.{part}." for part in parts))})
+        network.load_state_dict(state)
+        return module.eval()
     try:
         number = float(value)
     except ValueError:

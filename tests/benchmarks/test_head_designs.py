@@ -8,12 +8,15 @@ from pathlib import Path
 import pytest
 import torch
 
-from benchmarks.head_designs import EnsembleHead, main, person_probability
+from benchmarks.head_designs import EnsembleHead, design_module, main, person_probability
+from detector.checkpoint import load_checkpoint
 from detector.yolox.head import OBJECTNESS, YoloxHead
+from detector.yolox.polar import init_network_from_pretrained
 
 ROOT = Path(__file__).resolve().parents[2]
 CHECKPOINT = ROOT / "models" / "fishloc-default.pt"
 SAMPLES = ROOT / "samples" / "annotations.json"
+PRETRAINED = ROOT / "models" / "pretrained" / "yolox_nano.onnx"
 
 
 def _heads() -> tuple[YoloxHead, YoloxHead, list[torch.Tensor]]:
@@ -60,6 +63,21 @@ def test_an_ensemble_that_cannot_be_is_refused(combination: str, weight: float, 
         EnsembleHead(tuned, other, combination, weight)
 
 
+def test_a_graft_takes_the_named_parts_from_coco_and_keeps_the_rest() -> None:
+    checkpoint = load_checkpoint(CHECKPOINT)
+    trained = design_module(checkpoint, "as-trained", str(PRETRAINED)).state_dict()
+    grafted = design_module(checkpoint, "coco:cls_convs+cls_preds", str(PRETRAINED)).state_dict()
+    coco = init_network_from_pretrained(str(PRETRAINED), checkpoint.config).state_dict()
+    taken = [name for name in grafted if name.startswith(("net.head.cls_convs.", "net.head.cls_preds."))]
+    assert len(taken) == 30
+    for name, tensor in grafted.items():
+        if name in taken:
+            assert torch.equal(tensor, coco[name.removeprefix("net.")])
+            assert not torch.equal(tensor, trained[name]) or not tensor.is_floating_point()
+        else:
+            assert torch.equal(tensor, trained[name])
+
+
 def test_designs_on_a_shipped_frame(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "heads.json"
     designs = ["as-trained", "logits:1", "logits:0", "foot-passes:2"]
@@ -80,7 +98,8 @@ def test_designs_on_a_shipped_frame(tmp_path: Path, capsys: pytest.CaptureFixtur
 
 @pytest.mark.parametrize(("design", "message"), [
     ("vote:0.5", "unknown design"), ("logits", "unknown design"), ("foot-passes:0", "whole number"),
-    ("foot-passes:1.5", "whole number"), ("mean:2", "[0, 1]")])
+    ("foot-passes:1.5", "whole number"), ("mean:2", "[0, 1]"), ("coco:wings", "head parts are"),
+    ("coco:", "head parts are")])
 def test_a_design_that_cannot_be_is_refused(design: str, message: str, capsys: pytest.CaptureFixture[str]
                                             ) -> None:
     assert main(["--checkpoint", str(CHECKPOINT), "--choose", str(SAMPLES), "--data", f"samples={SAMPLES}",
