@@ -41,6 +41,7 @@ from torch import Tensor, nn
 from benchmarks.view_designs import design_figures, read_sets, report
 from contract.views import DEFAULT_VIEW
 from detector.yolox.head import OBJECTNESS, YoloxHead
+from models import ASSETS_DIR
 
 DEFAULT_DESIGNS = ("as-trained", "logits:0.5", "geometric:0.5", "geometric:0.7", "mean:0.5",
                    "coco:cls_preds", "coco:cls_convs+cls_preds", "coco:stems+cls_convs+cls_preds",
@@ -143,8 +144,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.head_designs", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--checkpoint", required=True, help="a polar YOLOX-Nano checkpoint (.pt)")
-    parser.add_argument("--pretrained", default="models/pretrained/yolox_nano.onnx",
-                        help="the COCO network the checkpoint started from (the ensembles' second head)")
+    parser.add_argument("--pretrained", default=str(ASSETS_DIR / "pretrained" / "yolox_nano.onnx"),
+                        help="the COCO network the checkpoint started from (the ensembles' second head, "
+                             "the grafts' parts)")
     parser.add_argument("--choose", type=Path, required=True, metavar="ANNOTATIONS",
                         help="validation renders on which each design gets its operating point")
     parser.add_argument("--data", action="append", required=True, metavar="NAME=ANNOTATIONS",
