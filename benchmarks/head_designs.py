@@ -30,8 +30,9 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, cast
 
@@ -97,12 +98,12 @@ def person_probability(maps: Tensor) -> Tensor:
     return torch.sigmoid(maps[:, OBJECTNESS:OBJECTNESS + 1]) * torch.sigmoid(maps[:, OBJECTNESS + 1:])
 
 
-def design_module(checkpoint: Any, design: str, pretrained: str) -> nn.Module:
-    """The contract module of `checkpoint` read as `design` (module docstring); ValueError for a
-    design it cannot be."""
+def design_module(checkpoint: Any, design: str, coco: Callable[[], nn.Module]) -> nn.Module:
+    """The contract module of `checkpoint` read as `design` (module docstring), `coco` giving the COCO
+    network it started from (read only for the designs that take from it); ValueError for a design
+    it cannot be."""
     from detector.graph import contract_module
     from detector.yolox.network import YoloxNano
-    from detector.yolox.polar import init_network_from_pretrained
 
     module = contract_module(checkpoint)
     network = getattr(module, "net", None)
@@ -116,7 +117,7 @@ def design_module(checkpoint: Any, design: str, pretrained: str) -> nn.Module:
         unknown = [part for part in parts if part not in HEAD_PARTS]
         if unknown or not value:
             raise ValueError(f"{design}: head parts are {'+'.join(HEAD_PARTS)}, got {value!r}")
-        coco_state = init_network_from_pretrained(pretrained, checkpoint.config).state_dict()
+        coco_state = coco().state_dict()
         state = network.state_dict()
         state.update({name: coco_state[name] for name in state
                       if name.startswith(tuple(f"head.{part}." for part in parts))})
@@ -129,14 +130,14 @@ def design_module(checkpoint: Any, design: str, pretrained: str) -> nn.Module:
     if kind == "foot-passes":
         if network.foot is None or network.foot.refiner is None or number != int(number) or number < 1:
             raise ValueError(f"{design}: needs a foot refiner and a whole number of passes ≥ 1")
-        network.foot.refine_steps = int(number)
+        module.net = network.with_foot_refine_steps(int(number)).eval()
         return module
     if kind not in COMBINATIONS:
         raise ValueError(f"unknown design {design!r}")
-    coco = init_network_from_pretrained(pretrained, checkpoint.config)
-    assert isinstance(coco, YoloxNano) and isinstance(network.head, YoloxHead)
+    pretrained = coco()
+    assert isinstance(pretrained, YoloxNano) and isinstance(network.head, YoloxHead)
     # it answers `forward` and `forward_features` as the head it wraps does
-    network.head = cast(YoloxHead, EnsembleHead(network.head, coco.head, kind, number))
+    network.head = cast(YoloxHead, EnsembleHead(network.head, pretrained.head, kind, number))
     return module.eval()
 
 
@@ -164,6 +165,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from detector.evaluate import TorchContract
     from detector.graph import contract_info
     from detector.yolox.onnx_weights import PretrainedWeightsError
+    from detector.yolox.polar import PolarDetectorConfig, init_network_from_pretrained
 
     torch.set_num_threads(args.threads)
     view = DEFAULT_VIEW if args.max_view_pixels is None else dataclasses.replace(
@@ -171,7 +173,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     designs = args.design or list(DEFAULT_DESIGNS)
     try:
         checkpoint = load_checkpoint(args.checkpoint)
-        modules = {design: design_module(checkpoint, design, args.pretrained) for design in designs}
+        config = checkpoint.config
+        if not isinstance(config, PolarDetectorConfig):
+            raise ValueError("the head designs need a polar YOLOX-Nano checkpoint")
+        # read once, shared by every design that takes from it (none changes it)
+        coco = functools.cache(lambda: init_network_from_pretrained(args.pretrained, config).eval())
+        modules = {design: design_module(checkpoint, design, coco) for design in designs}
         choose_on = read_dataset(args.choose)[:args.limit]
         sets = read_sets(args.data, args.limit)
     except (CheckpointError, DatasetFormatError, PretrainedWeightsError, ValueError) as error:

@@ -65,9 +65,10 @@ def test_an_ensemble_that_cannot_be_is_refused(combination: str, weight: float, 
 
 def test_a_graft_takes_the_named_parts_from_coco_and_keeps_the_rest() -> None:
     checkpoint = load_checkpoint(CHECKPOINT)
-    trained = design_module(checkpoint, "as-trained", str(PRETRAINED)).state_dict()
-    grafted = design_module(checkpoint, "coco:cls_convs+cls_preds", str(PRETRAINED)).state_dict()
-    coco = init_network_from_pretrained(str(PRETRAINED), checkpoint.config).state_dict()
+    network = init_network_from_pretrained(str(PRETRAINED), checkpoint.config)
+    trained = design_module(checkpoint, "as-trained", lambda: network).state_dict()
+    grafted = design_module(checkpoint, "coco:cls_convs+cls_preds", lambda: network).state_dict()
+    coco = network.state_dict()
     taken = [name for name in grafted if name.startswith(("net.head.cls_convs.", "net.head.cls_preds."))]
     assert len(taken) == 30
     for name, tensor in grafted.items():
