@@ -13,7 +13,7 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor, nn
 
-from detector.yolox.foot import foot_from_offsets
+from detector.yolox.foot import REFINE_MIN_SCORE, foot_from_offsets
 from detector.yolox.head import CLASSES_START, OBJECTNESS
 from detector.yolox.network import STRIDES, YoloxNano
 
@@ -73,13 +73,14 @@ def peak_cells(maps: Sequence[Tensor]) -> Tensor:
     return flatten_maps(peaks)[..., 0]  # (B, A)
 
 
-def top_people(net: nn.Module, image: Tensor, max_detections: int, peaks: bool = False
-               ) -> tuple[Tensor, Tensor, Tensor | None]:
+def top_people(net: nn.Module, image: Tensor, max_detections: int, peaks: bool = False,
+               refine_min_score: float = REFINE_MIN_SCORE) -> tuple[Tensor, Tensor, Tensor | None]:
     """(N, H, W, 3) uint8 RGB images -> the `max_detections` cells of highest objectness x
     p(person) (with `peaks`, among the cells that are peaks of their level: `peak_cells`): boxes
     (N, K, 4) `cxcywh` in YOLOX's edge coordinates (pixel i spans [i, i + 1)), scores (N, K)
     descending and, for a network with a foot branch, their foot points (N, K, 2) in the same
-    coordinates (else None). What both views' ONNX graphs compute before their own box layout."""
+    coordinates (else None), refined where they score `refine_min_score` or more
+    (`FootHead.refine_scored`). What both views' ONNX graphs compute before their own box layout."""
     bgr = image.permute(0, 3, 1, 2).flip(1).float()  # (N, 3, H, W) BGR 0-255, as YOLOX was trained
     offsets: list[Tensor] | None = None
     if isinstance(net, YoloxNano) and net.foot is not None:
@@ -97,4 +98,5 @@ def top_people(net: nn.Module, image: Tensor, max_detections: int, peaks: bool =
         return cxcywh, top_scores, None
     ab = torch.gather(flatten_maps(offsets), 1, top[..., None].expand(-1, -1, 2))  # (N, K, 2)
     assert isinstance(net, YoloxNano) and net.foot is not None
-    return cxcywh, top_scores, net.foot.refine(fine, foot_from_offsets(ab, cxcywh))
+    coarse = foot_from_offsets(ab, cxcywh)
+    return cxcywh, top_scores, net.foot.refine_scored(fine, coarse, top_scores, refine_min_score)

@@ -48,6 +48,10 @@ REFINE_STRIDE = 8  # the refiner reads the finest level's stem output
 REFINE_SIDE = 5  # samples per side of the patch it reads about a coarse foot point
 REFINE_STEP_PX = 4.0  # strip px between two samples (half a stride-8 cell)
 REFINE_SCALE_PX = 8.0  # strip px per unit of its output
+# Candidates scoring below this keep their coarse foot point in the contract graph (`refine_scored`):
+# the lowest score evaluation counts (detector.evaluate.EVAL_MIN_SCORE) and far below any operating
+# threshold, so every detection a figure or a user sees at those scores is refined.
+REFINE_MIN_SCORE = 0.05
 
 
 class FootNeck(nn.Module):
@@ -103,6 +107,21 @@ class FootHead(nn.Module):
         passes = self.passes(fine_features, points)
         return passes[-1] if passes else points
 
+    def refine_scored(self, fine_features: Tensor, points: Tensor, scores: Tensor,
+                      min_score: float = REFINE_MIN_SCORE) -> Tensor:
+        """`refine` of the (B, K, 2) coarse points of the candidates whose (B, K) `scores`,
+        descending, reach `min_score`; the others keep their coarse point.
+
+        The graph's top K (300) are mostly cells no threshold keeps: 20-40 of them score 0.05 or
+        more on a render, at most about 120. The refiner samples 25 points about each candidate and
+        runs its MLP on them, so refining the scored prefix alone saves most of its time
+        (docs/DETECTOR.md, "A faster graph"). The prefix has one length for the batch, the longest
+        image's: another image's lower candidates within it are refined too, as `refine` would."""
+        count = int((scores >= min_score).sum(dim=1).max().item()) if scores.numel() else 0
+        torch._check(count >= 0)  # a data-dependent length in the exported graph
+        torch._check(count <= points.shape[1])
+        return torch.cat([self.refine(fine_features, points[:, :count]), points[:, count:]], dim=1)
+
 
 class FootRefiner(nn.Module):
     """A second stage: the finest level's stem output (B, width, H/8, W/8) sampled on a
@@ -132,7 +151,8 @@ class FootRefiner(nn.Module):
 
     def forward(self, fine_features: Tensor, points: Tensor) -> Tensor:
         batch, count = points.shape[:2]
-        flat = self.patches(fine_features, points).reshape(batch, count, -1)  # (B, K, C S²)
+        samples = fine_features.shape[1] * REFINE_SIDE ** 2  # named: K may be 0 (`refine_scored`)
+        flat = self.patches(fine_features, points).reshape(batch, count, samples)  # (B, K, C S²)
         return points + self.mlp(flat) * REFINE_SCALE_PX
 
 

@@ -16,19 +16,22 @@ from contract.views import polar_grid
 from detector.checkpoint import Checkpoint, ModelInfo, load_checkpoint, save_checkpoint
 from detector.data.readers import read_dataset
 from detector.metrics import EvalFrame, compute_metrics
+from detector.yolox.decode import top_people
 from detector.yolox.finetune import FinetuneConfig, Finetuner
 from detector.yolox.foot import (
     MAX_METRES_PER_PX,
+    REFINE_MIN_SCORE,
     REFINE_SIDE,
     REFINE_STEP_PX,
     REFINE_STRIDE,
+    FootHead,
     FootRefiner,
     foot_from_offsets,
     foot_loss,
     strip_feet,
 )
 from detector.yolox.network import YoloxNano
-from detector.yolox.polar import PolarContract, PolarDetectorConfig, init_from_pretrained
+from detector.yolox.polar import EDGE_TO_CENTRE_PX, PolarContract, PolarDetectorConfig, init_from_pretrained
 from detector.yolox.strips import PolarStripDataset, StripAugment, collate_feet, frame_strip, training_info
 from exporter.export import export_onnx
 from exporter.parity import synthetic_parity_frames
@@ -218,16 +221,21 @@ def test_the_refiner_reads_the_fine_features_about_each_point_and_starts_as_the_
     torch.testing.assert_close(patches[0, :, :, -1], points[0] + half)
 
 
-def test_refiner_passes_each_read_the_patch_about_the_previous_answer() -> None:
-    from detector.yolox.foot import FootHead
-
-    head = FootHead(width=2, levels=3, depthwise=True, refine=True, refine_steps=2)
+def _moving_head(refine_steps: int = 1) -> FootHead:
+    """A foot head whose refiner moves each point by what it reads."""
+    head = FootHead(width=2, levels=3, depthwise=True, refine=True, refine_steps=refine_steps)
     assert head.refiner is not None
     with torch.no_grad():
         torch.manual_seed(1)
         for layer in head.refiner.mlp:
             if isinstance(layer, torch.nn.Linear):
                 layer.weight.normal_(0.0, 0.05)
+    return head
+
+
+def test_refiner_passes_each_read_the_patch_about_the_previous_answer() -> None:
+    head = _moving_head(refine_steps=2)
+    assert head.refiner is not None
     maps, points = _coordinate_maps(16, 24), torch.tensor([[[40.0, 30.0], [101.5, 66.25]]])
     once = head.refiner(maps, points)
     assert not torch.allclose(once, points)
@@ -236,8 +244,26 @@ def test_refiner_passes_each_read_the_patch_about_the_previous_answer() -> None:
         dataclasses.replace(CONFIG, foot_refine=True, foot_refine_steps=0)
 
 
+def test_only_the_candidates_scored_from_the_floor_are_refined() -> None:
+    head = _moving_head()
+    maps = _coordinate_maps(16, 24).expand(2, -1, -1, -1)
+    points = torch.tensor([[40.0, 30.0], [101.5, 66.25], [60.0, 20.0], [80.0, 50.0]]).expand(2, -1, -1)
+    scores = torch.tensor([[0.9, 0.3, 0.04, 0.01], [0.8, 0.06, REFINE_MIN_SCORE, 0.0]])  # descending
+    everything = head.refine(maps, points)
+    assert not torch.allclose(everything, points)
+    refined = head.refine_scored(maps, points, scores)  # the longest scored prefix: 3 of the 4
+    torch.testing.assert_close(refined[:, :3], everything[:, :3])
+    torch.testing.assert_close(refined[:, 3:], points[:, 3:])  # coarse beneath the floor
+    torch.testing.assert_close(head.refine_scored(maps, points, torch.zeros(2, 4)), points)  # none
+    torch.testing.assert_close(head.refine_scored(maps, points, scores, min_score=0.0), everything)
+
+
 def test_export_carries_the_refined_foot_and_matches_torch(footed: YoloxNano, tmp_path: Path) -> None:
-    network = footed.with_foot_refiner().with_foot_neck()
+    raised = copy.deepcopy(footed)
+    with torch.no_grad():  # a person score over the refiner's floor for some of the toy's candidates
+        for pred in raised.head.obj_preds:
+            pred.bias.add_(4.0)
+    network = raised.with_foot_refiner().with_foot_neck()
     assert network.foot is not None and network.foot.refiner is not None and network.foot.features
     with torch.no_grad():  # a refiner that moves the points by what it reads, a neck of its own
         torch.manual_seed(0)
@@ -250,7 +276,7 @@ def test_export_carries_the_refined_foot_and_matches_torch(footed: YoloxNano, tm
     checkpoint = Checkpoint(config, network.state_dict(), ModelInfo("refine-test", "toy", 0.3), {})
     report = export_onnx(checkpoint, tmp_path / "refined.onnx")  # the parity check covers the foot
     assert report.parity.frames > 0
-    plain = export_onnx(Checkpoint(CONFIG, footed.state_dict(), ModelInfo("plain", "toy", 0.3), {}),
+    plain = export_onnx(Checkpoint(CONFIG, raised.state_dict(), ModelInfo("plain", "toy", 0.3), {}),
                         tmp_path / "plain.onnx")
     strips = synthetic_parity_frames(64, count=1, width=288)
     refined_raw = OnnxModel(tmp_path / "refined.onnx", SessionThreads(1)).run(strips[0])
@@ -258,6 +284,18 @@ def test_export_carries_the_refined_foot_and_matches_torch(footed: YoloxNano, tm
     np.testing.assert_allclose(refined_raw.boxes, plain_raw.boxes, atol=1e-4)  # boxes untouched
     assert refined_raw.foot is not None and plain_raw.foot is not None
     assert np.abs(refined_raw.foot - plain_raw.foot).max() > 0.01  # the refiner moved the feet
+    # the graph refines the candidates from the floor (a length it counts) and leaves the rest coarse
+    image = torch.from_numpy(strips[0])[None]
+    with torch.no_grad():
+        _, scores, every = top_people(network.eval(), image, CONFIG.max_detections, refine_min_score=0.0)
+        _, _, coarse = top_people(network, image, CONFIG.max_detections, refine_min_score=2.0)
+    assert every is not None and coarse is not None
+    scored = scores[0].numpy() >= REFINE_MIN_SCORE
+    assert 0 < scored.sum() < len(scored)
+    np.testing.assert_allclose(refined_raw.scores, scores[0].numpy(), atol=1e-5)
+    every_px, coarse_px = (feet[0].numpy() - EDGE_TO_CENTRE_PX for feet in (every, coarse))
+    np.testing.assert_allclose(refined_raw.foot[scored], every_px[scored], atol=1e-3)
+    np.testing.assert_allclose(refined_raw.foot[~scored], coarse_px[~scored], atol=1e-3)
 
 
 def test_cli_adds_the_foot_to_a_polar_checkpoint(
