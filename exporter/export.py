@@ -97,11 +97,22 @@ def _torch_to_onnx(model: nn.Module, info: ModelInfo, path: Path, opset: int) ->
                           dynamic_shapes={"image": shapes}, external_data=False, verbose=False)
 
 
+# Each node's Python stack at export: 2 KB a node, the exporting machine's paths in every one, and
+# nothing onnxruntime reads (the nodes keep their module scopes, `namespace`, for profiles).
+_NODE_KEYS_DROPPED = ("pkg.torch.onnx.stack_trace",)
+
+
 def _write_metadata(path: Path, metadata: dict[str, str]) -> None:
     proto = onnx.load(str(path))
     del proto.metadata_props[:]
     for key, value in metadata.items():
         proto.metadata_props.add(key=key, value=value)
+    for node in proto.graph.node:
+        kept = [(entry.key, entry.value) for entry in node.metadata_props
+                if entry.key not in _NODE_KEYS_DROPPED]
+        del node.metadata_props[:]
+        for key, value in kept:
+            node.metadata_props.add(key=key, value=value)
     onnx.checker.check_model(proto, full_check=True)
     onnx.save(proto, str(path))
 

@@ -72,6 +72,8 @@ def test_contract_inputs_outputs_and_metadata(exported: tuple[Checkpoint, Path, 
     dims = [d.dim_param or d.dim_value for d in tensor.shape.dim]
     assert isinstance(dims[0], str) and dims[1:] == [SIZE, SIZE, 3]
     assert [o.name for o in proto.graph.output] == ["boxes", "scores"]
+    node_keys = {entry.key for node in proto.graph.node for entry in node.metadata_props}
+    assert "namespace" in node_keys and "pkg.torch.onnx.stack_trace" not in node_keys  # no machine's paths
 
 
 @pytest.mark.parametrize("batch", [1, 3])
