@@ -12,7 +12,9 @@ import pytest
 
 from contract import OnnxModel, SessionThreads, prepare_input
 from detector.checkpoint import load_checkpoint
+from detector.evaluate import EVAL_MIN_SCORE
 from detector.graph import contract_info
+from detector.yolox.foot import REFINE_MIN_SCORE
 from exporter.export import contract_model, export_onnx
 from exporter.parity import check_parity
 from fisheye import load_camera
@@ -40,6 +42,10 @@ def test_release_checkpoint_matches_the_shipped_onnx() -> None:
     assert shipped.info.planned  # any height and width: the service plans each camera's view
     assert (shipped.info.default_min_score, shipped.info.nms_iou) == (0.236, 0.35)
     assert "Apache-2.0" in shipped.info.licence
+    # The graph refines the feet of the candidates from REFINE_MIN_SCORE alone: every detection the
+    # service reports at the model's operating points, and every one evaluation counts, is among them.
+    thresholds = [shipped.info.default_min_score, *(point.min_score for _, point in shipped.info.view_points)]
+    assert len(thresholds) >= 2 and min([*thresholds, EVAL_MIN_SCORE]) >= REFINE_MIN_SCORE
     module, _ = contract_model(checkpoint)
     strips = _sample_strips(shipped)
     report = check_parity(module, shipped, strips, shipped.info.default_min_score)
