@@ -111,6 +111,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     polar.add_argument("--crop", type=int, default=0, metavar="COLUMNS",
                        help="train on strip windows of this many columns (a multiple of 32) around "
                             "the people, a fraction of the strip's cost per sample (default: whole strips)")
+    polar.add_argument("--foot-metres-cap", type=float, default=None, metavar="M_PER_PX",
+                       help="where a person's weight in the foot loss stops, in metres per strip px "
+                            "(default 0.1: detector.yolox.foot.MAX_METRES_PER_PX); higher weighs the far "
+                            "people, whose px span more floor, nearer their share of the floor error")
     polar.add_argument("--distill", type=float, default=None, help="λ of the COCO distillation (default 1.0)")
     polar.add_argument("--teacher", default=None, metavar="PATH.onnx|PATH.pt",
                        help="distil from this network (a COCO ONNX or a polar checkpoint of the same "
@@ -291,6 +295,8 @@ def run_polar(args: argparse.Namespace) -> int:
             batch_size=args.batch_size or defaults.batch_size, lr=args.lr or defaults.lr,
             freeze=default_freeze(args.network) if args.freeze is None else tuple(args.freeze),
             distill=defaults.distill if args.distill is None else args.distill,
+            foot_max_metres_per_px=(defaults.foot_max_metres_per_px if args.foot_metres_cap is None
+                                    else args.foot_metres_cap),
             checkpoint_every_s=args.checkpoint_every or defaults.checkpoint_every_s,
             seed=args.seed, val_limit=args.val_limit, device=args.device,
             augment=augment)

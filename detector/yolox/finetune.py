@@ -49,6 +49,7 @@ from detector.schedule import restore_rng, rng_state, seed_everything, warmup_co
 from detector.trainer import resolve_device
 from detector.yolox.fisheye import ARCH as FISHEYE_ARCH
 from detector.yolox.fisheye import FisheyeDetectorConfig
+from detector.yolox.foot import MAX_METRES_PER_PX
 from detector.yolox.frames import FisheyeFrameDataset, FrameAugment
 from detector.yolox.loss import PolarDetectionLoss, PolarLossConfig
 from detector.yolox.network import YoloxNano
@@ -88,6 +89,7 @@ class FinetuneConfig:
     freeze: tuple[str, ...] = ("stem", "dark2", "dark3")  # of STAGES
     distill: float = 1.0  # λ
     iou_weight: float = 5.0
+    foot_max_metres_per_px: float = MAX_METRES_PER_PX  # cap of a person's foot-loss weight
     augment: StripAugment | FrameAugment = field(default_factory=StripAugment)  # of the view trained
     checkpoint_every_s: float = 180.0
     seed: int = 0
@@ -99,6 +101,9 @@ class FinetuneConfig:
         if unknown:
             raise ValueError(f"freeze: unknown stages {sorted(unknown)}; choose from "
                              f"{', '.join(STAGES)} (YOLOX) or {', '.join(NANODET_STAGES)} (NanoDet)")
+        if not self.foot_max_metres_per_px > 0:  # NaN too
+            cap = self.foot_max_metres_per_px
+            raise ValueError(f"the foot loss's metres cap must be positive, got {cap}")
 
 
 YoloxDetectorConfig = PolarDetectorConfig | FisheyeDetectorConfig
@@ -178,7 +183,8 @@ class Finetuner:
         self.loss: PolarDetectionLoss | NanoDetDetectionLoss = (
             NanoDetDetectionLoss(NanoDetLossConfig(distill_weight=config.distill))
             if isinstance(self.model, NanoDetPlus) else
-            PolarDetectionLoss(PolarLossConfig(iou_weight=config.iou_weight, distill_weight=config.distill)))
+            PolarDetectionLoss(PolarLossConfig(iou_weight=config.iou_weight, distill_weight=config.distill,
+                                               foot_max_metres_per_px=config.foot_max_metres_per_px)))
         self.steps_per_epoch = max(1, math.ceil(len(train_frames) / config.batch_size))
         total = self.steps_per_epoch * config.epochs
         self.scheduler = torch.optim.lr_scheduler.LambdaLR(

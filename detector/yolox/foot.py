@@ -194,10 +194,11 @@ def foot_from_offsets(offsets: Tensor, cxcywh: Tensor) -> Tensor:
 
 
 def foot_loss(offsets: Tensor, boxes_xyxy: Tensor, targets: Tensor,
-              refine: tuple[Tensor, FootHead] | None = None) -> tuple[Tensor, int]:
+              refine: tuple[Tensor, FootHead] | None = None,
+              max_metres_per_px: float = MAX_METRES_PER_PX) -> tuple[Tensor, int]:
     """Sum over positives of metres-weighted L1 and their count (with `refine`, the image's
     (1, width, H/8, W/8) features and the head whose refiner reads them: the mean of the coarse
-    and every pass's loss).
+    and every pass's loss); each person's weight stops at `max_metres_per_px`.
 
     offsets (P, 2) predicted a, b; boxes_xyxy (P, 4) the cells' decoded boxes (the foot is read off
     the box the model itself predicts, as at inference); targets (P, 3) foot x, y (px) and metres
@@ -208,7 +209,7 @@ def foot_loss(offsets: Tensor, boxes_xyxy: Tensor, targets: Tensor,
     boxes = boxes_xyxy[valid].detach()
     cxcywh = torch.cat([(boxes[:, :2] + boxes[:, 2:]) / 2, boxes[:, 2:] - boxes[:, :2]], dim=1)
     predicted = foot_from_offsets(offsets[valid], cxcywh)  # (V, 2) px
-    weight = targets[valid, 2].clamp(max=MAX_METRES_PER_PX)
+    weight = targets[valid, 2].clamp(max=max_metres_per_px)
     error = (predicted - targets[valid, :2]).abs().sum(dim=1)  # (V,) px
     if refine is not None:
         fine, head = refine

@@ -31,7 +31,7 @@ from torch import Tensor
 from torch.nn import functional
 
 from detector.yolox.decode import cell_grid, flatten_maps
-from detector.yolox.foot import FootHead, foot_loss
+from detector.yolox.foot import MAX_METRES_PER_PX, FootHead, foot_loss
 from detector.yolox.head import CLASSES_START, OBJECTNESS
 from detector.yolox.network import STRIDES
 
@@ -44,6 +44,7 @@ class PolarLossConfig:
     iou_weight: float = 5.0
     distill_weight: float = 1.0  # λ of the distillation term
     foot_weight: float = 1.0  # of the foot term (per metre of error)
+    foot_max_metres_per_px: float = MAX_METRES_PER_PX  # where a person's foot weight stops (foot_loss)
     centre_radius: float = 2.5  # strides
 
 
@@ -188,7 +189,8 @@ class PolarDetectionLoss:
             if offsets is not None and feet is not None:
                 targets = feet[b].to(flat.device, flat.dtype)[owner[fg]]  # (P, 3)
                 image_refine = None if refine is None else (refine[0][b:b + 1], refine[1])
-                image_sum, image_count = foot_loss(offsets[b, fg], boxes[b, fg], targets, image_refine)
+                image_sum, image_count = foot_loss(offsets[b, fg], boxes[b, fg], targets, image_refine,
+                                                   self.config.foot_max_metres_per_px)
                 foot_sum, foot_count = foot_sum + image_sum, foot_count + image_count
         norm = float(max(positives, 1))
         objectness = functional.binary_cross_entropy_with_logits(flat[..., OBJECTNESS], objectness_target,

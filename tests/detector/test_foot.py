@@ -126,6 +126,17 @@ def test_foot_loss_counts_metres(offsets: list[list[float]], metres_per_px: floa
                                torch.tensor([[12.0, 10.0]]))
 
 
+def test_foot_loss_cap_is_a_setting() -> None:
+    box = torch.tensor([[10.0, 0.0, 14.0, 10.0]])  # the box side is 2 px short of the target
+    far = torch.tensor([[12.0, 12.0, 0.5]])  # 0.5 m per px, beyond the default cap
+    near = torch.tensor([[12.0, 12.0, 0.05]])
+    assert foot_loss(torch.zeros(1, 2), box, far, max_metres_per_px=0.3)[0].item() == pytest.approx(0.6)
+    assert foot_loss(torch.zeros(1, 2), box, far, max_metres_per_px=1.0)[0].item() == pytest.approx(1.0)
+    assert foot_loss(torch.zeros(1, 2), box, near, max_metres_per_px=0.3)[0].item() == pytest.approx(0.1)
+    with pytest.raises(ValueError, match="metres cap must be positive"):
+        FinetuneConfig(foot_max_metres_per_px=0.0)
+
+
 def test_crop_windows_keep_their_people_and_feet(toy_dataset: Callable[..., Path]) -> None:
     frames = read_dataset(toy_dataset(count=2, size=128, people=4))
     whole = PolarStripDataset(frames, CONFIG, StripAugment.none(), seed=2)
