@@ -115,6 +115,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="where a person's weight in the foot loss stops, in metres per strip px "
                             "(default 0.1: detector.yolox.foot.MAX_METRES_PER_PX); higher weighs the far "
                             "people, whose px span more floor, nearer their share of the floor error")
+    polar.add_argument("--foot-coarse-weight", type=float, default=None, metavar="W",
+                       help="the coarse foot point's weight in the foot loss against each pass of the "
+                            "refiner, whose point the graph serves (default 1: their plain mean)")
     polar.add_argument("--distill", type=float, default=None, help="λ of the COCO distillation (default 1.0)")
     polar.add_argument("--teacher", default=None, metavar="PATH.onnx|PATH.pt",
                        help="distil from this network (a COCO ONNX or a polar checkpoint of the same "
@@ -297,6 +300,8 @@ def run_polar(args: argparse.Namespace) -> int:
             distill=defaults.distill if args.distill is None else args.distill,
             foot_max_metres_per_px=(defaults.foot_max_metres_per_px if args.foot_metres_cap is None
                                     else args.foot_metres_cap),
+            foot_coarse_weight=(defaults.foot_coarse_weight if args.foot_coarse_weight is None
+                                else args.foot_coarse_weight),
             checkpoint_every_s=args.checkpoint_every or defaults.checkpoint_every_s,
             seed=args.seed, val_limit=args.val_limit, device=args.device,
             augment=augment)

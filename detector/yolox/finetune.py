@@ -90,6 +90,7 @@ class FinetuneConfig:
     distill: float = 1.0  # λ
     iou_weight: float = 5.0
     foot_max_metres_per_px: float = MAX_METRES_PER_PX  # cap of a person's foot-loss weight
+    foot_coarse_weight: float = 1.0  # the coarse foot point's weight against each refiner pass
     augment: StripAugment | FrameAugment = field(default_factory=StripAugment)  # of the view trained
     checkpoint_every_s: float = 180.0
     seed: int = 0
@@ -104,6 +105,9 @@ class FinetuneConfig:
         if not self.foot_max_metres_per_px > 0:  # NaN too
             cap = self.foot_max_metres_per_px
             raise ValueError(f"the foot loss's metres cap must be positive, got {cap}")
+        if not self.foot_coarse_weight >= 0:  # NaN too
+            weight = self.foot_coarse_weight
+            raise ValueError(f"the coarse foot point's weight must be 0 or more, got {weight}")
 
 
 YoloxDetectorConfig = PolarDetectorConfig | FisheyeDetectorConfig
@@ -184,7 +188,8 @@ class Finetuner:
             NanoDetDetectionLoss(NanoDetLossConfig(distill_weight=config.distill))
             if isinstance(self.model, NanoDetPlus) else
             PolarDetectionLoss(PolarLossConfig(iou_weight=config.iou_weight, distill_weight=config.distill,
-                                               foot_max_metres_per_px=config.foot_max_metres_per_px)))
+                                               foot_max_metres_per_px=config.foot_max_metres_per_px,
+                                               foot_coarse_weight=config.foot_coarse_weight)))
         self.steps_per_epoch = max(1, math.ceil(len(train_frames) / config.batch_size))
         total = self.steps_per_epoch * config.epochs
         self.scheduler = torch.optim.lr_scheduler.LambdaLR(

@@ -195,10 +195,12 @@ def foot_from_offsets(offsets: Tensor, cxcywh: Tensor) -> Tensor:
 
 def foot_loss(offsets: Tensor, boxes_xyxy: Tensor, targets: Tensor,
               refine: tuple[Tensor, FootHead] | None = None,
-              max_metres_per_px: float = MAX_METRES_PER_PX) -> tuple[Tensor, int]:
+              max_metres_per_px: float = MAX_METRES_PER_PX, coarse_weight: float = 1.0
+              ) -> tuple[Tensor, int]:
     """Sum over positives of metres-weighted L1 and their count (with `refine`, the image's
     (1, width, H/8, W/8) features and the head whose refiner reads them: the mean of the coarse
-    and every pass's loss); each person's weight stops at `max_metres_per_px`.
+    point's loss, weighted `coarse_weight`, and every pass's); each person's weight stops at
+    `max_metres_per_px`.
 
     offsets (P, 2) predicted a, b; boxes_xyxy (P, 4) the cells' decoded boxes (the foot is read off
     the box the model itself predicts, as at inference); targets (P, 3) foot x, y (px) and metres
@@ -214,9 +216,10 @@ def foot_loss(offsets: Tensor, boxes_xyxy: Tensor, targets: Tensor,
     if refine is not None:
         fine, head = refine
         passes = head.passes(fine, predicted[None])
+        error = error * coarse_weight
         for refined in passes:
             error = error + (refined[0] - targets[valid, :2]).abs().sum(dim=1)
-        error = error / (1 + len(passes))
+        error = error / (coarse_weight + len(passes))
     return (error * weight).sum(), int(valid.sum())
 
 

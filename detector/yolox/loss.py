@@ -45,6 +45,7 @@ class PolarLossConfig:
     distill_weight: float = 1.0  # λ of the distillation term
     foot_weight: float = 1.0  # of the foot term (per metre of error)
     foot_max_metres_per_px: float = MAX_METRES_PER_PX  # where a person's foot weight stops (foot_loss)
+    foot_coarse_weight: float = 1.0  # of the coarse point against each refiner pass (foot_loss)
     centre_radius: float = 2.5  # strides
 
 
@@ -190,7 +191,8 @@ class PolarDetectionLoss:
                 targets = feet[b].to(flat.device, flat.dtype)[owner[fg]]  # (P, 3)
                 image_refine = None if refine is None else (refine[0][b:b + 1], refine[1])
                 image_sum, image_count = foot_loss(offsets[b, fg], boxes[b, fg], targets, image_refine,
-                                                   self.config.foot_max_metres_per_px)
+                                                   self.config.foot_max_metres_per_px,
+                                                   self.config.foot_coarse_weight)
                 foot_sum, foot_count = foot_sum + image_sum, foot_count + image_count
         norm = float(max(positives, 1))
         objectness = functional.binary_cross_entropy_with_logits(flat[..., OBJECTNESS], objectness_target,

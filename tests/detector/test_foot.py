@@ -211,6 +211,12 @@ def test_foot_loss_with_a_refiner_averages_the_coarse_and_every_pass() -> None:
         last.bias.copy_(torch.tensor([0.0, 0.125]))  # each pass moves the point 1 px (scale 8 px) down
     total, count = foot_loss(torch.zeros(1, 2), box, target, (fine, head))
     assert count == 1 and total.item() == pytest.approx((2.0 + 1.0 + 0.0) / 3 * 0.05, abs=1e-6)
+    weighted, _ = foot_loss(torch.zeros(1, 2), box, target, (fine, head), coarse_weight=0.5)
+    assert weighted.item() == pytest.approx((0.5 * 2.0 + 1.0 + 0.0) / 2.5 * 0.05, abs=1e-6)
+    refined_only, _ = foot_loss(torch.zeros(1, 2), box, target, (fine, head), coarse_weight=0.0)
+    assert refined_only.item() == pytest.approx((1.0 + 0.0) / 2 * 0.05, abs=1e-6)
+    with pytest.raises(ValueError, match="coarse foot point's weight"):
+        FinetuneConfig(foot_coarse_weight=float("nan"))
 
 
 def _coordinate_maps(height: int, width: int) -> torch.Tensor:
