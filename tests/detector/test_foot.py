@@ -30,6 +30,7 @@ from detector.yolox.foot import (
     foot_loss,
     strip_feet,
 )
+from detector.yolox.loss import PolarDetectionLoss, PolarLossConfig
 from detector.yolox.network import YoloxNano
 from detector.yolox.polar import EDGE_TO_CENTRE_PX, PolarContract, PolarDetectorConfig, init_from_pretrained
 from detector.yolox.strips import PolarStripDataset, StripAugment, collate_feet, frame_strip, training_info
@@ -135,6 +136,15 @@ def test_foot_loss_cap_is_a_setting() -> None:
     assert foot_loss(torch.zeros(1, 2), box, near, max_metres_per_px=0.3)[0].item() == pytest.approx(0.1)
     with pytest.raises(ValueError, match="metres cap must be positive"):
         FinetuneConfig(foot_max_metres_per_px=0.0)
+    # the detection loss passes its cap on: one far person (0.5 m per px, beyond both caps), each
+    # positive cell's foot read off its own box, so the term scales with the cap alone
+    maps = [torch.zeros(1, 6, 64 // stride, 256 // stride) for stride in (8, 16, 32)]
+    offsets = [torch.zeros(1, 2, 64 // stride, 256 // stride) for stride in (8, 16, 32)]
+    label = torch.tensor([[100.0, 10.0, 140.0, 50.0]])  # xyxy strip px
+    feet = torch.tensor([[120.0, 52.0, 0.5]])  # foot x, y px, metres per px
+    terms = {cap: PolarDetectionLoss(PolarLossConfig(foot_max_metres_per_px=cap))(
+        maps, [label], foot_offsets=offsets, feet=[feet])["foot"].item() for cap in (0.1, 0.3)}
+    assert terms[0.3] == pytest.approx(3 * terms[0.1]) and terms[0.1] > 0
 
 
 def test_crop_windows_keep_their_people_and_feet(toy_dataset: Callable[..., Path]) -> None:
