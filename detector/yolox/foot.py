@@ -23,9 +23,8 @@ Training targets come from the renders' `location_m`, projected into the frame b
 into the strip by the polar grid (`strip_feet`). The loss is L1 in strip pixels times the metres
 one strip row spans at the target (`metres_per_px`), so far people, with few pixels per metre,
 count in metres, not pixels. The weight stops at `MAX_METRES_PER_PX` (by default; `fishloc train
---foot-metres-cap` sets it): near the horizon one row
-spans half a metre and more, where a person's feet are a pixel or two and their error is mostly
-noise no offset can learn; uncapped, those few people outweighed the near ones twenty to one and
+--foot-metres-cap` sets it): near the horizon one row spans half a metre and more, where a person's
+feet are a pixel or two and their error is mostly noise no offset can learn; uncapped, those few people outweighed the near ones twenty to one and
 the near band, where most people stand, hardly learnt (measured: docs/DETECTOR.md, "Foot point").
 """
 
