@@ -24,8 +24,9 @@ into the strip by the polar grid (`strip_feet`). The loss is L1 in strip pixels 
 one strip row spans at the target (`metres_per_px`), so far people, with few pixels per metre,
 count in metres, not pixels. The weight stops at `MAX_METRES_PER_PX` (by default; `fishloc train
 --foot-metres-cap` sets it): near the horizon one row spans half a metre and more, where a person's
-feet are a pixel or two and their error is mostly noise no offset can learn; uncapped, those few people outweighed the near ones twenty to one and
-the near band, where most people stand, hardly learnt (measured: docs/DETECTOR.md, "Foot point").
+feet are a pixel or two and their error is mostly noise no offset can learn; uncapped, those few
+people outweighed the near ones twenty to one and the near band, where most people stand, hardly
+learnt (measured: docs/DETECTOR.md, "Foot point").
 """
 
 from __future__ import annotations
