@@ -69,6 +69,12 @@ DESIGNS: dict[str, ViewPlanConfig] = {
     **{f"rim band {across:g}x across, {along:g}x along + nadir view": dataclasses.replace(
         DEFAULT_VIEW, scales=tuple(sorted({1.0, along, across})), max_pixels=4_000_000, outer_row_scale=along)
        for across, along in ((1.5, 1.0), (2.0, 1.0), (1.5, 1.25))},
+    # after 0.7.3: each band px the mean of 2 x 2 samples of the frame, decoded twice as large
+    # (`ViewPlanConfig.unwrap_samples`), in the default view and with two bands
+    "the default view, 2 x 2 samples a px (area-averaged)": dataclasses.replace(
+        DEFAULT_VIEW, unwrap_samples=2),
+    "two bands 1.0x / 1.5x + nadir view, 2 x 2 samples a px": dataclasses.replace(
+        DEFAULT_VIEW, max_pixels=4_000_000, unwrap_samples=2),
 }
 FIGURES = ("AP50", "precision", "recall", "AP_far", "recall_nadir", "mPE", "mPE_reported")
 

@@ -212,13 +212,15 @@ def view_plan(info: ModelInfo, camera: FisheyeCamera, config: ViewPlanConfig = D
 def min_decoded_side(info: ModelInfo, camera: FisheyeCamera, config: ViewPlanConfig = DEFAULT_VIEW) -> int:
     """The smallest long side (px) a reduced decode of `camera`'s frame may have for this model:
     the letterbox's side, or for a polar strip one frame pixel per strip row along the radius (for
-    a planned view, per row of its densest band, and per `NADIR_DECODE_SLACK` px of its nadir view)."""
+    a planned view, per sample row of its densest band, `ViewPlanConfig.unwrap_samples` a row, and
+    per `NADIR_DECODE_SLACK` px of its nadir view)."""
     if info.polar is None:
         return info.input_size
     if info.planned:
         plan = view_plan(info, camera, config)
         nadir = [plan.nadir.scale / NADIR_DECODE_SLACK] if plan.nadir else []
-        return math.ceil(max(camera.image_size) * max([g.px_per_radius_px for g in plan.grids] + nadir))
+        bands = [g.px_per_radius_px * config.unwrap_samples for g in plan.grids]
+        return math.ceil(max(camera.image_size) * max(bands + nadir))
     grid = polar_grid(info, camera)
     return math.ceil(max(camera.image_size) * grid.height / grid.radius_px)
 
@@ -248,8 +250,9 @@ def prepare_input(info: ModelInfo, rgb: NDArray[np.uint8], camera: FisheyeCamera
     scale_xy = (decoded_wh[0] / frame_wh[0], decoded_wh[1] / frame_wh[1])
     if info.planned:
         plan = view_plan(info, camera, config)
-        map_u, map_v = _cached_canvas_maps(plan, scale_xy)
-        return unwrap_with_maps(rgb, map_u, map_v, info.pad_value, workers), PlannedInput(plan)
+        samples = config.unwrap_samples
+        map_u, map_v = _cached_canvas_maps(plan, scale_xy, samples)
+        return unwrap_with_maps(rgb, map_u, map_v, info.pad_value, workers, samples), PlannedInput(plan)
     grid = polar_grid(info, camera)
     map_u, map_v = _cached_maps(grid, scale_xy)
     return unwrap_with_maps(rgb, map_u, map_v, info.pad_value, workers), PolarInput(grid)
@@ -419,15 +422,17 @@ def _cached_nadir_maps(nadir: NadirPiece, scale_xy: tuple[float, float]) -> tupl
 
 
 @functools.lru_cache(maxsize=32)
-def _cached_canvas_maps(plan: ViewPlan, scale_xy: tuple[float, float]) -> tuple[NDArray[Any], NDArray[Any]]:
-    """The canvas's sampling maps (fixed-point), every piece at its rows, the gaps outside the frame."""
+def _cached_canvas_maps(plan: ViewPlan, scale_xy: tuple[float, float], samples: int = 1
+                        ) -> tuple[NDArray[Any], NDArray[Any]]:
+    """The canvas's sampling maps (fixed-point; `samples` per px along each axis), every piece at
+    its rows, the gaps outside the frame."""
     width, height = plan.canvas_wh
-    map_u = np.full((height, width), -1e4, dtype=np.float32)
-    map_v = np.full((height, width), -1e4, dtype=np.float32)
+    map_u = np.full((height * samples, width * samples), -1e4, dtype=np.float32)
+    map_v = np.full((height * samples, width * samples), -1e4, dtype=np.float32)
     for grid, offset in zip(plan.grids, plan.row_offsets, strict=True):
-        piece_u, piece_v = grid.sampling_maps(scale_xy)
+        piece_u, piece_v = grid.sampling_maps(scale_xy, samples)
         rows, columns = piece_u.shape
-        map_u[offset:offset + rows, :columns] = piece_u
-        map_v[offset:offset + rows, :columns] = piece_v
+        map_u[offset * samples:offset * samples + rows, :columns] = piece_u
+        map_v[offset * samples:offset * samples + rows, :columns] = piece_v
     fixed_uv, fraction = cv2.convertMaps(map_u, map_v, cv2.CV_16SC2)
     return np.asarray(fixed_uv), np.asarray(fraction)

@@ -125,24 +125,28 @@ class PolarGrid:
         radius = np.hypot(offset[:, 0], offset[:, 1])
         return np.stack([self.angle_to_column(angle), self.radius_to_row(radius)], axis=1)
 
-    def sampling_maps(self, scale_xy: tuple[float, float] = (1.0, 1.0)
+    def sampling_maps(self, scale_xy: tuple[float, float] = (1.0, 1.0), samples: int = 1
                       ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
         """`cv2.remap` maps (height, width + overlap) float32 of an image that is the frame resized
-        by `scale_xy` (its pixel u' = (u + 0.5)·s − 0.5, as cv2.resize and reduced JPEG decodes)."""
+        by `scale_xy` (its pixel u' = (u + 0.5)·s − 0.5, as cv2.resize and reduced JPEG decodes);
+        with `samples` n > 1, (n·height, n·(width + overlap)) maps: each strip px's n × n samples,
+        spread evenly over its square, for `unwrap_with_maps` to average."""
         strip_w, strip_h = self.strip_wh
-        columns, rows = np.meshgrid(np.arange(strip_w, dtype=np.float64),
-                                    np.arange(strip_h, dtype=np.float64))
+        offsets = (np.arange(samples, dtype=np.float64) + 0.5) / samples - 0.5
+        columns, rows = np.meshgrid((np.arange(strip_w, dtype=np.float64)[:, None] + offsets).ravel(),
+                                    (np.arange(strip_h, dtype=np.float64)[:, None] + offsets).ravel())
         uv = self.strip_to_frame(np.stack([columns.ravel(), rows.ravel()], axis=1))
         map_u = (uv[:, 0] + 0.5) * scale_xy[0] - 0.5
         map_v = (uv[:, 1] + 0.5) * scale_xy[1] - 0.5
-        return (map_u.reshape(strip_h, strip_w).astype(np.float32),
-                map_v.reshape(strip_h, strip_w).astype(np.float32))
+        shape = (strip_h * samples, strip_w * samples)
+        return map_u.reshape(shape).astype(np.float32), map_v.reshape(shape).astype(np.float32)
 
     def unwrap(self, image: NDArray[np.uint8], scale_xy: tuple[float, float] = (1.0, 1.0),
-               border_value: int = 0) -> NDArray[np.uint8]:
-        """(H, W, C) uint8 frame (resized by `scale_xy`) -> (height, width + overlap, C) strip."""
-        map_u, map_v = self.sampling_maps(scale_xy)
-        return unwrap_with_maps(image, map_u, map_v, border_value)
+               border_value: int = 0, samples: int = 1) -> NDArray[np.uint8]:
+        """(H, W, C) uint8 frame (resized by `scale_xy`) -> (height, width + overlap, C) strip,
+        each px one bilinear sample, or the mean of `samples` × `samples` (`sampling_maps`)."""
+        map_u, map_v = self.sampling_maps(scale_xy, samples)
+        return unwrap_with_maps(image, map_u, map_v, border_value, samples=samples)
 
     # ----- boxes
 
@@ -200,14 +204,20 @@ class PolarGrid:
 
 
 def unwrap_with_maps(image: NDArray[np.uint8], map_u: NDArray[Any], map_v: NDArray[Any],
-                     border_value: int = 0, workers: int = 1) -> NDArray[np.uint8]:
+                     border_value: int = 0, workers: int = 1, samples: int = 1) -> NDArray[np.uint8]:
     """Sample `image` at precomputed `sampling_maps` (bilinear; outside the image: `border_value`),
     float or as `cv2.convertMaps` makes them fixed-point. With `workers` > 1 the output's rows are
     split into that many blocks, remapped at once on as many threads (OpenCV releases the GIL), the
     same pixels as one call: for a frame that has the cores to itself (the service keeps OpenCV's
-    own pool at one thread, `service.runner`)."""
+    own pool at one thread, `service.runner`). Maps of `samples` n > 1 samples per px along each
+    axis give the mean of each px's n × n samples: a strip px that spans several frame px at the
+    rim then averages them, as a downscale does, rather than reading the two nearest."""
     import cv2
 
+    if samples > 1:
+        sampled = unwrap_with_maps(image, map_u, map_v, border_value, workers)
+        rows, columns = sampled.shape[0] // samples, sampled.shape[1] // samples
+        return np.asarray(cv2.resize(sampled, (columns, rows), interpolation=cv2.INTER_AREA), dtype=np.uint8)
     channels = 1 if image.ndim == 2 else image.shape[2]
     border = (border_value,) * channels
     rows = map_u.shape[0]

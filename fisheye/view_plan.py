@@ -113,6 +113,12 @@ class ViewPlanConfig:
     # (docs/DETECTOR.md, "The rim band widened across the ray alone"): a design, not the rule. None (the
     # default): the outer band is scaled alike on both axes, people keep the shape the network learnt.
     outer_row_scale: float | None = None
+    # Each px of the bands the mean of this many bilinear samples of the frame along each axis
+    # (`fisheye.polar.PolarGrid.sampling_maps`), the frame decoded that much larger: where a band px
+    # spans several frame px (across the ray at the rim) it averages them as a downscale does. The
+    # shipped network, trained on one sample per px, lost on every set with 2 x 2 (docs/DETECTOR.md,
+    # "Other runtimes and an area-averaged unwrap"): a design, not the rule. 1 (the default): one sample.
+    unwrap_samples: int = 1
 
     def __post_init__(self) -> None:
         if not self.scales or any(not (0.25 <= s <= 4.0) for s in self.scales) or (
@@ -132,6 +138,8 @@ class ViewPlanConfig:
         if self.outer_row_scale is not None and not self.scales[0] <= self.outer_row_scale <= self.scales[-1]:
             raise ValueError(f"outer_row_scale must lie within the scales {self.scales}, got "
                              f"{self.outer_row_scale}")
+        if not 1 <= self.unwrap_samples <= 4:
+            raise ValueError(f"unwrap_samples must lie in [1, 4], got {self.unwrap_samples}")
         if self.nadir_strip_from is not None and not 0 < self.nadir_strip_from < self.nadir_view_fraction:
             raise ValueError("need 0 < nadir_strip_from < nadir_view_fraction: the nadir view must show "
                              "the disc the strip leaves out")

@@ -4,6 +4,7 @@ through the service's pipeline with a test-double model."""
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable
 from pathlib import Path
 
@@ -22,7 +23,7 @@ from contract import (
     metadata_props,
     parse_metadata,
 )
-from contract.views import DEFAULT_VIEW, mapping_layout, view_reference
+from contract.views import DEFAULT_VIEW, mapping_layout, min_decoded_side, view_reference
 from fisheye import FisheyeCamera, camera_from_dict, foot_points
 from fisheye.view_plan import nadir_side
 from service.frame_decode import FrameError
@@ -163,6 +164,26 @@ def test_a_planned_outer_band_maps_its_boxes_to_the_frame(tmp_path: Path) -> Non
     assert box[3] == pytest.approx(BOX_WH[1] / rows_per_px, rel=0.01)
     assert np.dot(offset, ray) == pytest.approx(np.linalg.norm(uv - pp), abs=2.0)
     np.testing.assert_allclose(detections.foot_px[0], uv - ray * box[3] / 2, atol=2.0)
+
+
+def test_a_view_of_two_by_two_samples_a_px_places_the_person_as_one_sample_does(tmp_path: Path) -> None:
+    # `ViewPlanConfig.unwrap_samples`: the same canvas, each px the mean of 2 x 2 samples, from a
+    # frame decoded twice as large along the radius
+    path = save_polar_double(tmp_path / "planned.onnx", foot=True, planned=True)
+    model = OnnxModel(path, SessionThreads(1))
+    sampled_view = dataclasses.replace(DEFAULT_VIEW, unwrap_samples=2)
+    one, sampled = (Pipeline(model, PipelineConfig(view=view)) for view in (DEFAULT_VIEW, sampled_view))
+    camera = camera_from_dict(CAMERA)
+    plan = one.plan(camera)
+    assert plan is not None and plan == sampled.plan(camera)
+    bands = max(grid.px_per_radius_px for grid in plan.grids)
+    assert min_decoded_side(model.info, camera, sampled_view) >= math.ceil(1024 * 2 * bands) > (
+        min_decoded_side(model.info, camera, DEFAULT_VIEW))
+    data, _ = _person_frame(camera, (1.5, 0.8))
+    found, found_sampled = (pipeline.detect(data, camera).detections for pipeline in (one, sampled))
+    assert len(found.scores) == len(found_sampled.scores) == 1
+    np.testing.assert_allclose(found_sampled.cxcywh, found.cxcywh, atol=1.5)
+    np.testing.assert_allclose(found_sampled.foot_px, found.foot_px, atol=1.5)
 
 
 def test_a_camera_record_plans_its_own_view_within_the_limit(tmp_path: Path) -> None:

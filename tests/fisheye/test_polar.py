@@ -125,6 +125,25 @@ def test_an_unwrap_of_as_many_rows_as_workers_or_fewer(workers: int) -> None:
     assert np.array_equal(unwrap_with_maps(frame, map_u, map_v, workers=workers), frame[:3, :8])
 
 
+def test_each_px_of_a_sampled_unwrap_averages_its_samples_spread_over_its_square() -> None:
+    samples_u, samples_v = GRID.sampling_maps((1.0, 1.0), samples=2)
+    assert samples_u.shape == (192, 832)
+    # each px's 2 x 2 samples sit a quarter px either side of its centre
+    quarter = GRID.strip_to_frame(np.array([[10 - 0.25, 40 - 0.25], [10 + 0.25, 40 + 0.25]]))
+    np.testing.assert_allclose([samples_u[80, 20], samples_v[80, 20]], quarter[0], atol=1e-3)
+    np.testing.assert_allclose([samples_u[81, 21], samples_v[81, 21]], quarter[1], atol=1e-3)
+    rng = np.random.default_rng(2)
+    frame = rng.integers(0, 255, (1000, 1024, 3), dtype=np.uint8)
+    sampled = GRID.unwrap(frame, samples=2)
+    assert sampled.shape == (96, 416, 3) and sampled.dtype == np.uint8
+    by_hand = unwrap_with_maps(frame, samples_u, samples_v).astype(np.float64)
+    mean = by_hand.reshape(96, 2, 416, 2, 3).mean(axis=(1, 3))
+    assert np.abs(sampled - mean).max() <= 1  # cv2's area mean rounds
+    # at the rim a px spans ~7 frame px across the ray: on noise the one-sample unwrap keeps the
+    # frame's spread, the averaged one loses most of it (what a downscale does)
+    assert sampled[:10].std() < 0.8 * GRID.unwrap(frame)[:10].std()
+
+
 @pytest.mark.parametrize("kwargs", [dict(height=0), dict(width=0), dict(overlap=-1),
                                     dict(overlap=500), dict(radius_px=0.0), dict(radius_px=math.nan)])
 def test_invalid_grids_are_refused(kwargs: dict[str, float]) -> None:

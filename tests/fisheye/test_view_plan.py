@@ -167,7 +167,8 @@ def test_a_budget_below_any_view_is_refused() -> None:
 @pytest.mark.parametrize("kwargs", [{"scales": ()}, {"scales": (1.5, 1.0)}, {"max_pixels": 10},
                                     {"target_along_px": 0.0}, {"person_height_m": 4.0},
                                     {"min_outer_fraction": 0.0}, {"min_outer_fraction": 1.0},
-                                    {"outer_row_scale": 0.5}, {"outer_row_scale": 2.0}])
+                                    {"outer_row_scale": 0.5}, {"outer_row_scale": 2.0},
+                                    {"unwrap_samples": 0}, {"unwrap_samples": 5}])
 def test_config_refuses_nonsense(kwargs: dict[str, object]) -> None:
     with pytest.raises(ValueError):
         ViewPlanConfig(**kwargs)  # type: ignore[arg-type]
