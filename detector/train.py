@@ -108,6 +108,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     polar.add_argument("--band-scale", type=float, nargs="+", default=[1.0], metavar="SCALE",
                        help="strips at these multiples of the served rows and columns per turn (a planned "
                             "view's bands, e.g. 1 1.5), one drawn per sample, in windows of the served rows")
+    polar.add_argument("--unwrap-samples", type=int, default=1, metavar="N",
+                       help="each strip px the mean of N x N samples of the frame, as a view of "
+                            "ViewPlanConfig.unwrap_samples N serves it (default 1: one bilinear sample)")
     polar.add_argument("--crop", type=int, default=0, metavar="COLUMNS",
                        help="train on strip windows of this many columns (a multiple of 32) around "
                             "the people, a fraction of the strip's cost per sample (default: whole strips)")
@@ -177,9 +180,10 @@ def run(args: argparse.Namespace) -> int:
 def yolox_view(args: argparse.Namespace) -> tuple[YoloxDetectorConfig, StripAugment | FrameAugment]:
     """The network config and augmentation of `--view`; ValueError for flags of the other view."""
     if args.view == "fisheye":
-        if args.strip is not None or args.zoom != [1.0] or args.band_scale != [1.0] or args.inner_head:
-            raise ValueError("--strip, --zoom, --band-scale and --inner-head are options of the polar view, "
-                             "not of --view fisheye")
+        if (args.strip is not None or args.zoom != [1.0] or args.band_scale != [1.0] or args.inner_head
+                or args.unwrap_samples != 1):
+            raise ValueError("--strip, --zoom, --band-scale, --unwrap-samples and --inner-head are options "
+                             "of the polar view, not of --view fisheye")
         size = {} if args.input_size is None else {"input_size": args.input_size}
         rotation = True if args.rotation_aug is None else args.rotation_aug
         flip = 0.0 if args.no_flip else FrameAugment().flip
@@ -192,10 +196,10 @@ def yolox_view(args: argparse.Namespace) -> tuple[YoloxDetectorConfig, StripAugm
         name = f"fishloc-{args.network}-polar"
         return (PolarDetectorConfig(**strip, network=args.network, model_name=name),
                 StripAugment(radius_scales=tuple(args.zoom), band_scales=tuple(args.band_scale),
-                             crop_width=args.crop))
+                             crop_width=args.crop, unwrap_samples=args.unwrap_samples))
     return (PolarDetectorConfig(**strip, inner_fraction=args.inner_head),
             StripAugment(radius_scales=tuple(args.zoom), band_scales=tuple(args.band_scale),
-                         crop_width=args.crop))
+                         crop_width=args.crop, unwrap_samples=args.unwrap_samples))
 
 
 def default_freeze(network: str) -> tuple[str, ...]:

@@ -69,6 +69,10 @@ class StripAugment:
     # > 0: train on windows of this many columns (a multiple of 32), centred near a random label:
     # the network is convolutional, and a window costs a fraction of the strip's forward pass.
     crop_width: int = 0
+    # Each strip px the mean of this many samples of the frame along each axis, as a view of
+    # `ViewPlanConfig.unwrap_samples` serves it (docs/DETECTOR.md, "Other runtimes and an
+    # area-averaged unwrap"); 1: one bilinear sample, as the service's default view.
+    unwrap_samples: int = 1
 
     def __post_init__(self) -> None:
         if not self.radius_scales or min(self.radius_scales) <= 0:
@@ -77,6 +81,8 @@ class StripAugment:
             raise ValueError(f"band_scales must be at least 1, got {self.band_scales}")
         if self.crop_width < 0 or self.crop_width % 32:
             raise ValueError(f"crop_width must be 0 or a positive multiple of 32, got {self.crop_width}")
+        if not 1 <= self.unwrap_samples <= 4:
+            raise ValueError(f"unwrap_samples must lie in [1, 4], got {self.unwrap_samples}")
 
     @classmethod
     def none(cls) -> StripAugment:
@@ -170,18 +176,20 @@ def place_labels(xyxy: FloatArray, width: int, strip_wh: tuple[int, int]) -> Flo
     return label_copies(xyxy, width, strip_wh)[0]
 
 
-def frame_strip(frame: FrameAnnotations, info: ModelInfo, radius_scale: float = 1.0, band_scale: float = 1.0
-                ) -> tuple[NDArray[np.uint8], FloatArray, FloatArray, int]:
+def frame_strip(frame: FrameAnnotations, info: ModelInfo, radius_scale: float = 1.0, band_scale: float = 1.0,
+                samples: int = 1) -> tuple[NDArray[np.uint8], FloatArray, FloatArray, int]:
     """A frame -> its full-turn strip (H, width, 3) RGB at start angle 0 (the served one, its radius
-    times `radius_scale`, its rows and columns times `band_scale`), its labels (N, 4) strip px
+    times `radius_scale`, its rows and columns times `band_scale`, each px the mean of `samples` ×
+    `samples` samples of a frame decoded that much larger), its labels (N, 4) strip px
     (first-turn centres, full turns left out), their feet (N, 3) (`detector.yolox.foot.strip_feet`:
     strip px and metres per px, NaN where unknown) and how many full-turn labels were left out."""
     if frame.camera is None or info.polar is None:
         raise ValueError(f"{frame.path}: polar strips need the frame's camera and a polar model")
     camera = frame.camera
     turn_info = dataclasses.replace(info, polar=dataclasses.replace(info.polar, overlap=0))
-    reduced = reduce_like_decode(load_rgb(frame), math.ceil(min_decoded_side(turn_info, camera) * band_scale))
-    if radius_scale == 1.0 and band_scale == 1.0:
+    reduced = reduce_like_decode(load_rgb(frame),
+                                 math.ceil(min_decoded_side(turn_info, camera) * band_scale * samples))
+    if radius_scale == 1.0 and band_scale == 1.0 and samples == 1:
         strip, _ = prepare_input(turn_info, reduced, camera)
         grid = polar_grid(turn_info, camera)
     else:
@@ -191,7 +199,7 @@ def frame_strip(frame: FrameAnnotations, info: ModelInfo, radius_scale: float = 
                                    width=round(grid.width * band_scale))
         width, height = camera.image_size
         scale_xy = (reduced.shape[1] / width, reduced.shape[0] / height)
-        strip = grid.unwrap(reduced, scale_xy, info.pad_value)
+        strip = grid.unwrap(reduced, scale_xy, info.pad_value, samples)
     xyxy = grid.radius_aligned_to_polar(frame.boxes_cxcywh).reshape(-1, 4)
     full = full_turn_mask(grid, xyxy)
     feet = strip_feet(grid, camera, frame.locations_m[~full], xyxy[~full])
@@ -307,7 +315,8 @@ class PolarStripDataset:
         key = (index, radius_scale, band_scale)
         if key in self._strips:
             return self._strips[key]
-        strip, xyxy, feet, full_turns = frame_strip(self.frames[index], self.info, radius_scale, band_scale)
+        strip, xyxy, feet, full_turns = frame_strip(self.frames[index], self.info, radius_scale, band_scale,
+                                                    self.augment.unwrap_samples)
         if full_turns:
             log.info("%s: %d people over the principal point left out", self.frames[index].path, full_turns)
         if self.cache:

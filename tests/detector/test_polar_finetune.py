@@ -15,6 +15,7 @@ from onnx import TensorProto, helper
 
 from contract.views import polar_grid
 from detector.checkpoint import Checkpoint, load_checkpoint, save_checkpoint, save_release
+from detector.data.dataset import load_rgb
 from detector.data.readers import FrameAnnotations, read_dataset
 from detector.model import tiny_config
 from detector.yolox.finetune import FinetuneConfig, Finetuner
@@ -138,6 +139,28 @@ def test_a_band_scale_strip_is_the_band_of_a_planned_view(toy_dataset: Callable[
     assert len(sample.feet) == len(labels)
     with pytest.raises(ValueError, match="band_scales"):
         StripAugment(band_scales=(0.5,))
+
+
+def test_an_averaged_strip_is_the_view_of_as_many_samples(toy_dataset: Callable[..., Path]) -> None:
+    # `StripAugment.unwrap_samples`: the same strip and labels, each px the mean of its 2 x 2
+    # samples, as the service's view of `ViewPlanConfig.unwrap_samples` 2 makes it
+    frame = read_dataset(toy_dataset(count=1, size=128, people=4))[0]
+    info = training_info(CONFIG)
+    strip, xyxy, feet, _ = frame_strip(frame, info)
+    averaged, averaged_xyxy, averaged_feet, _ = frame_strip(frame, info, samples=2)
+    assert averaged.shape == strip.shape and not np.array_equal(averaged, strip)
+    np.testing.assert_array_equal(averaged_xyxy, xyxy)
+    np.testing.assert_array_equal(averaged_feet, feet)
+    turn = dataclasses.replace(info, polar=dataclasses.replace(info.polar, overlap=0))
+    grid = polar_grid(turn, frame.camera)
+    rgb = load_rgb(frame)
+    scale = (rgb.shape[1] / frame.camera.image_size[0], rgb.shape[0] / frame.camera.image_size[1])
+    assert np.array_equal(averaged, grid.unwrap(rgb, scale, info.pad_value, samples=2))
+    dataset = PolarStripDataset([frame], CONFIG, StripAugment(unwrap_samples=2, roll=False, flip=0.0), seed=1)
+    dataset.set_epoch(0)
+    np.testing.assert_array_equal(dataset.base(0)[0], averaged)
+    with pytest.raises(ValueError, match="unwrap_samples"):
+        StripAugment(unwrap_samples=0)
 
 
 # ----- loss
