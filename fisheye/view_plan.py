@@ -115,9 +115,10 @@ class ViewPlanConfig:
     outer_row_scale: float | None = None
     # Each px of the bands the mean of this many bilinear samples of the frame along each axis
     # (`fisheye.polar.PolarGrid.sampling_maps`), the frame decoded that much larger: where a band px
-    # spans several frame px (across the ray at the rim) it averages them as a downscale does. The
-    # shipped network, trained on one sample per px, lost on every set with 2 x 2 (docs/DETECTOR.md,
-    # "Other runtimes and an area-averaged unwrap"): a design, not the rule. 1 (the default): one sample.
+    # spans several frame px (across the ray at the rim) it averages them as a downscale does. With
+    # 2 x 2 the shipped network, trained on one sample a px, lost on scenes4 and gained on no set
+    # (docs/DETECTOR.md, "Other runtimes and an area-averaged unwrap"): a design, not the rule.
+    # 1 (the default): one sample.
     unwrap_samples: int = 1
 
     def __post_init__(self) -> None:
