@@ -2,8 +2,9 @@
 
 The service runs its graph in onnxruntime. OpenVINO (`pip install openvino`; not a dependency of
 FishLoc) is the other mature CPU runtime for such graphs, with bf16 kernels on CPUs that have them.
-This times both on the same inputs, interleaved run by run, and reports p50 / p95 / p99, each
-runtime's ratio to onnxruntime's p50 and how far its candidate scores are from onnxruntime's:
+This times both on the same inputs, interleaved run by run with a pause before each run (so that
+neither runtime's idle threads take the cores from the other's run), and reports p50 / p95 / p99,
+each runtime's ratio to onnxruntime's p50 and how far its candidate scores are from onnxruntime's:
 
     pip install openvino
     python -m benchmarks.runtimes --model models/fishloc-default.onnx --runs 40 --json runtimes.json
@@ -31,9 +32,14 @@ from numpy.typing import NDArray
 
 from benchmarks.machine import machine_info
 from benchmarks.stats import summarize
+from contract import SessionThreads
+from contract.model import session_options
 
 DEFAULT_INPUTS = ("416x1792", "960x1888", "384x384")
 WARM_UP_RUNS = 3
+# A pause before each timed run: a runtime's pool threads may spin on after its run returns
+# (OpenVINO's do), and run back to back they take the cores from the next runtime's run.
+PAUSE_S = 0.05
 Runner = Callable[[NDArray[np.uint8]], list[NDArray[Any]]]  # an input (1, H, W, 3) -> the graph's outputs
 
 
@@ -74,11 +80,9 @@ def openvino_runners(graph: bytes, threads: int) -> dict[str, Runner]:
 
 
 def onnxruntime_runner(graph: bytes, threads: int) -> Runner:
-    """onnxruntime's CPU session on `graph` with the service's settings on `threads` spinning threads."""
-    options = ort.SessionOptions()
-    options.intra_op_num_threads = threads
-    options.inter_op_num_threads = 1
-    options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+    """onnxruntime's CPU session on `graph` as the service makes one for a frame alone on the model:
+    `threads` threads whose pools spin (`contract.model.session_options`)."""
+    options = session_options(SessionThreads(intra_op=threads), spinning=True, intra_op=threads)
     session = ort.InferenceSession(graph, options, providers=["CPUExecutionProvider"])
     return lambda image: [np.asarray(out) for out in session.run(None, {session.get_inputs()[0].name: image})]
 
@@ -93,18 +97,21 @@ def block_image(height: int, width: int, seed: int = 0) -> NDArray[np.uint8]:
 def compare(runners: dict[str, Runner], image: NDArray[np.uint8], runs: int) -> dict[str, dict[str, Any]]:
     """Each runner timed on `image` `runs` times, interleaved, after warm-up: its summary in ms, its
     p50 over the first runner's, and its largest score difference from the first runner's."""
-    reference = next(iter(runners.values()))(image)[-1]
+    scores = {name: runner(image)[-1] for name, runner in runners.items()}  # the first warm-up run
+    reference = next(iter(scores.values()))
     times: dict[str, list[float]] = {name: [] for name in runners}
-    for run in range(WARM_UP_RUNS + runs):
+    for run in range(1, WARM_UP_RUNS + runs):
         for name, runner in runners.items():
+            time.sleep(PAUSE_S)
             start = time.perf_counter()
             runner(image)
             if run >= WARM_UP_RUNS:
                 times[name].append((time.perf_counter() - start) * 1000)
-    base = summarize(next(iter(times.values()))).p50
-    return {name: {**summarize(ms).as_dict(), "ratio_p50": summarize(ms).p50 / base,
-                   "max_score_difference": float(np.abs(runners[name](image)[-1] - reference).max())}
-            for name, ms in times.items()}
+    summaries = {name: summarize(ms) for name, ms in times.items()}
+    base = next(iter(summaries.values())).p50
+    return {name: {**summary.as_dict(), "ratio_p50": summary.p50 / base,
+                   "max_score_difference": float(np.abs(scores[name] - reference).max())}
+            for name, summary in summaries.items()}
 
 
 def parse_size(text: str) -> tuple[int, int]:

@@ -123,7 +123,9 @@ def _boxes_only(data: bytes) -> bytes:
     return bytes(Extractor(model).extract_model(["image"], ["boxes", "scores"]).SerializeToString())
 
 
-def _session_options(threads: SessionThreads, spinning: bool, intra_op: int) -> ort.SessionOptions:
+def session_options(threads: SessionThreads, spinning: bool, intra_op: int) -> ort.SessionOptions:
+    """onnxruntime's options for a session of the service's: `intra_op` threads, pools that spin or
+    sleep (`SessionThreads`), every graph optimisation, sequential execution."""
     options = ort.SessionOptions()
     options.intra_op_num_threads = intra_op
     options.inter_op_num_threads = threads.inter_op
@@ -177,7 +179,7 @@ class OnnxModel:
         # threads, sleeping, so that two frames at once share the cores without waking each
         # other's pools (on 2 cores one thread each, no wake-ups at all).
         shared = max(1, threads.intra_op // 2) if threads.spinning == "alone" else threads.intra_op
-        options = _session_options(threads, spinning=threads.spinning == "on", intra_op=shared)
+        options = session_options(threads, spinning=threads.spinning == "on", intra_op=shared)
         try:
             self.session = ort.InferenceSession(
                 data, sess_options=options, providers=["CPUExecutionProvider"]
@@ -195,7 +197,7 @@ class OnnxModel:
         # to itself; `_frames` and `_runs` count what is in flight (`frame`, `_chosen`).
         self._spinning: _Sessions | None = None
         if threads.spinning == "alone":
-            spin = _session_options(threads, spinning=True, intra_op=threads.intra_op)
+            spin = session_options(threads, spinning=True, intra_op=threads.intra_op)
             self._spinning = _Sessions(
                 ort.InferenceSession(data, sess_options=spin, providers=["CPUExecutionProvider"]),
                 (data, spin) if cuts else None)
