@@ -106,7 +106,8 @@ def place_people(rng: np.random.Generator, scene: Scene, count: int
             return False
         return all(np.hypot(px - x, py - y) >= _PERSON_GAP_M for px, py in taken)
 
-    sit_share = 0.35 if scene.kind == "indoor" else 0.1
+    # Offices are worked in seated; elsewhere most people stand or walk.
+    sit_share = 0.75 if scene.style == "office" else 0.35 if scene.kind == "indoor" else 0.1
     for _ in range(count):
         pose = str(rng.choice(["standing", "walking", "sitting"], p=[0.4 - sit_share / 2, 0.6 - sit_share / 2,
                                                                     sit_share]))

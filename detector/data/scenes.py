@@ -3,7 +3,10 @@
 A scene is fixed by (split, scene index): its random generator is seeded from those two only, and
 its colours come from the split's half of the palette pools, so seen and unseen scenes never share
 a layout or a palette. Indoor styles: rooms, classrooms, libraries, halls; outdoor: streets,
-squares, parking lots. The camera's floor frame has the nadir at the origin.
+squares, parking lots. Open-plan offices (rows of desks facing across screens, monitors, office
+chairs, most people seated) are drawn only when asked for (`style="office"`): adding them to the
+random draw would change every existing scene of every seed. The camera's floor frame has the nadir
+at the origin.
 """
 
 from __future__ import annotations
@@ -33,6 +36,8 @@ FloatArray = NDArray[np.float64]
 KINDS = ("indoor", "outdoor")
 INDOOR_STYLES = ("room", "classroom", "library", "hall")
 OUTDOOR_STYLES = ("street", "square", "parking")
+# Styles rendered only on request: the draw above picks among the first tuples alone.
+REQUESTED_STYLES = ("office",)
 CALIBRATION_SIZE = 2048
 
 
@@ -142,14 +147,103 @@ def _table_set(rng: np.random.Generator, x: float, y: float, yaw: float, length:
     return out
 
 
+def _workstation(rng: np.random.Generator, x: float, y: float, yaw: float, width: float, depth: float,
+                 top: Material, legs: Material, screen: Material, chair_seat: Material,
+                 chair_frame: Material) -> list[obj.Placed]:
+    """One office desk whose user faces `yaw` from (x, y)'s front side: monitors at the back edge,
+    a keyboard and papers, and an office chair pushed in, pulled out or turned (15 % none)."""
+    height = rng.uniform(0.72, 0.76)
+    desk = obj.table(x, y, yaw, width, depth, height, top, legs)
+    frame = yaw_frame(yaw)
+
+    def on_desk(local: tuple[float, float, float], half: NDArray[np.float64], turn: float,
+                material: Material) -> None:
+        centre = np.array([x, y, 0.0]) + frame @ np.asarray(local, np.float64)
+        desk.primitives.append(make_box(centre, half, yaw + turn, material))
+
+    # The desk's local x runs along its width; its user sits on the -y side, facing +y.
+    monitors = int(rng.choice([1, 1, 2]))
+    for k in range(monitors):
+        offset = (k - (monitors - 1) / 2) * 0.55 + rng.normal(0, 0.05)
+        tall = rng.uniform(0.28, 0.38)
+        on_desk((offset, depth / 2 - 0.18, height + 0.1 + tall / 2), np.array([0.26, 0.015, tall / 2]),
+                rng.normal(0, 0.12), screen)
+        on_desk((offset, depth / 2 - 0.12, height + 0.05), np.array([0.03, 0.03, 0.05]), 0.0, screen)
+    on_desk((rng.normal(0, 0.05), -depth / 2 + 0.2, height + 0.012), np.array([0.22, 0.07, 0.012]),
+            rng.normal(0, 0.1), mat(np.full(3, rng.uniform(0.05, 0.8))))
+    for _ in range(rng.integers(0, 4)):  # papers, folders, cups
+        r = rng.random()
+        half = (np.array([0.15, 0.11, 0.003]) if r < 0.6 else np.array([0.12, 0.16, 0.03]) if r < 0.85
+                else np.array([0.04, 0.04, 0.05]))
+        color = np.full(3, rng.uniform(0.8, 0.95)) if r < 0.6 else clothing_color(rng)
+        on_desk((rng.uniform(-width / 2 + 0.2, width / 2 - 0.2), rng.uniform(-depth / 2 + 0.12, depth / 4),
+                 height + half[2]), half, rng.uniform(0, np.pi), mat(color))
+    out = [desk]
+    if rng.random() < 0.85:
+        pulled = rng.uniform(0.25, 0.7)
+        cx, cy = np.array([x, y]) + frame[:2, :2] @ np.array([rng.normal(0, 0.15), -depth / 2 - pulled])
+        facing = yaw + np.pi / 2 + rng.normal(0, 0.5 if rng.random() < 0.7 else 1.5)
+        out.append(obj.chair(float(cx), float(cy), float(facing), rng.uniform(0.44, 0.52), chair_seat,
+                             chair_frame))
+    return out
+
+
+def _office_floor(rng: np.random.Generator, split: str, room: tuple[float, float, float, float],
+                  top: Material, legs: Material) -> list[obj.Placed]:
+    """Open-plan benching: rows of desk pairs facing each other across a screen, aisles between
+    the rows, storage along a wall."""
+    x0, y0, x1, y1 = room
+    along_x = bool(rng.random() < 0.5)
+    # Work in a frame where the rows run along u; (u, v) -> (x, y) swaps the axes for rows along y.
+    u0, u1, v0, v1 = (x0, x1, y0, y1) if along_x else (y0, y1, x0, x1)
+    width, depth = rng.uniform(1.2, 1.6), rng.uniform(0.7, 0.8)
+    aisle = rng.uniform(1.4, 2.2)
+    pitch = 2 * depth + aisle
+    screen = mat(np.full(3, rng.uniform(0.03, 0.15)))
+    fabric = mat(scene_color("rug", split, rng) * rng.uniform(0.6, 1.0))
+    chair_seat = mat(scene_color("furniture", split, rng) * rng.uniform(0.3, 1.0))
+    chair_frame = mat(np.full(3, rng.uniform(0.05, 0.3)))
+    screen_h = rng.uniform(1.05, 1.35)
+    items: list[obj.Placed] = []
+    margin = rng.uniform(1.0, 2.0)
+    for v in np.arange(v0 + margin + depth, v1 - margin - depth + 1e-6, pitch):
+        n = int((u1 - u0 - 2 * margin) // width)
+        if n < 1:
+            continue
+        start = u0 + (u1 - u0 - n * width) / 2
+        for k in range(n):
+            u = start + (k + 0.5) * width
+            for side in (-1, 1):  # the two desks of a pair face each other across the screen at v
+                w = v + side * depth / 2
+                x, y = (u, w) if along_x else (w, u)
+                # Its user sits on the aisle side, facing the screen: the desk's local +y points to v.
+                yaw = (np.pi if side > 0 else 0.0) if along_x else (np.pi / 2 if side > 0 else -np.pi / 2)
+                items += _workstation(rng, float(x), float(y), yaw, width, depth, top, legs, screen,
+                                      chair_seat, chair_frame)
+            # The screen in one piece a desk, so that the lens's clearance removes only those above it.
+            centre = np.array([u, v, screen_h / 2] if along_x else [v, u, screen_h / 2])
+            items.append(obj.Placed([make_box(centre, np.array([width / 2, 0.02, screen_h / 2]),
+                                              0.0 if along_x else np.pi / 2, fabric)],
+                                    (float(centre[0]), float(centre[1]), 0.05)))
+    for _ in range(rng.integers(0, 4)):  # storage along the walls
+        length = rng.uniform(0.8, 2.0)
+        cx, cy, yaw = ((rng.uniform(x0 + 1, x1 - 1), y1 - 0.3, 0.0) if rng.random() < 0.5
+                       else (x0 + 0.3, rng.uniform(y0 + 1, y1 - 1), np.pi / 2))
+        if all(np.hypot(o.footprint[0] - cx, o.footprint[1] - cy) > o.footprint[2] + 0.6 for o in items):
+            items.append(obj.cabinet(float(cx), float(cy), yaw, length, 0.5, rng.uniform(0.7, 1.9),
+                                     mat(scene_color("furniture", split, rng))))
+    return items
+
+
 def _indoor(rng: np.random.Generator, split: str, style: str, altitude: float
             ) -> tuple[Environment, list[obj.Placed], tuple[float, float, float, float]]:
-    sizes = {"room": (5, 12), "classroom": (7, 14), "library": (10, 25), "hall": (15, 45)}
+    sizes = {"room": (5, 12), "classroom": (7, 14), "library": (10, 25), "hall": (15, 45), "office": (8, 24)}
     lo, hi = sizes[style]
     room = _room(rng, (rng.uniform(lo, hi), rng.uniform(lo, hi)))
     x0, y0, x1, y1 = room
     kinds = {"room": ("tiles", "carpet", "wood"), "classroom": ("tiles", "carpet", "wood"),
-             "library": ("carpet", "wood", "carpet"), "hall": ("tiles", "concrete", "wood")}
+             "library": ("carpet", "wood", "carpet"), "hall": ("tiles", "concrete", "wood"),
+             "office": ("tiles", "carpet", "tiles")}
     floor_kind = str(rng.choice(kinds[style]))
     floor = floor_texture(floor_kind, scene_palette(floor_kind, split, rng), rng, rng.uniform(0.3, 0.6))
     second_kind = "carpet" if floor_kind != "carpet" else "tiles"
@@ -208,6 +302,8 @@ def _indoor(rng: np.random.Generator, split: str, style: str, altitude: float
             cx, cy = rng.uniform(split_x + 1.5, x1 - 1.5), rng.uniform(y0 + 1.5, y1 - 1.5)
             items += _table_set(rng, float(cx), float(cy), float(rng.choice([0, np.pi / 2])),
                                 rng.uniform(1.4, 2.6), rng.uniform(0.8, 1.2), top, legs, seat, (-1, 1))
+    elif style == "office":
+        items += _office_floor(rng, split, room, top, legs)
     elif style == "room":
         for _ in range(rng.integers(2, 6)):
             length, depth = rng.uniform(1.2, 3.2), rng.uniform(0.7, 1.2)
@@ -370,7 +466,7 @@ def _outdoor(rng: np.random.Generator, split: str, style: str
     return env, items, walk_area
 
 
-STYLES = INDOOR_STYLES + OUTDOOR_STYLES
+STYLES = INDOOR_STYLES + OUTDOOR_STYLES + REQUESTED_STYLES
 
 
 def build_scene(split: str, index: int, kind: str | None = None,
@@ -384,7 +480,7 @@ def build_scene(split: str, index: int, kind: str | None = None,
     if style is not None:
         if style not in STYLES:
             raise ValueError(f"style must be one of {STYLES}, got {style!r}")
-        kind = "indoor" if style in INDOOR_STYLES else "outdoor"
+        kind = "outdoor" if style in OUTDOOR_STYLES else "indoor"
     kind = kind or drawn_kind
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")

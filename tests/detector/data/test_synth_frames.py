@@ -13,11 +13,14 @@ from models import DEMO_CAMERA_PATH
 CONFIGS = {
     "indoor": SynthConfig(size=320, kind="indoor", people=(3, 8), images_per_scene=2),
     "outdoor": SynthConfig(size=320, kind="outdoor", people=(3, 8), images_per_scene=2),
+    "office": SynthConfig(size=320, style="office", people=(6, 12), images_per_scene=2),
     "demo": SynthConfig(size=288, kind="indoor", people=(2, 6), camera=load_camera(DEMO_CAMERA_PATH)),
 }
 CASES = [(name, index) for name in CONFIGS for index in range(3)]
 # The floor-truth checks are statistics: they use more frames of the same sets.
 LOCATION_CASES = [(name, index) for name in CONFIGS for index in range(6)]
+# The foot statistic describes the default mix; offices seat most people with their feet under desks.
+MIX_LOCATION_CASES = [(name, index) for name, index in LOCATION_CASES if name != "office"]
 
 
 @cache
@@ -39,7 +42,7 @@ def test_location_projects_near_the_foot_point() -> None:
     from the box's foot point, 90th percentile 0.31, on the 69 people of these 18 frames; shoes, and
     bodies seen from right above, reach nearer the principal point than the ankles."""
     ratios = []
-    for name, index in LOCATION_CASES:
+    for name, index in MIX_LOCATION_CASES:
         frame, _ = _frame(name, index)
         people = _located_people(name, index)
         assert people, "every test frame should show someone"
