@@ -152,15 +152,17 @@ def _predictor_entry(name: str, predictor: Predictor) -> Entry:
 
 def view_from_spec(text: str) -> ViewPlanConfig:
     """`PIXELS[,FIELD=VALUE...]` -> the default view plan with that budget and those numeric
-    `ViewPlanConfig` fields (e.g. `1000000,nadir_scale=1.25`); ValueError naming a bad one."""
+    `ViewPlanConfig` fields (e.g. `1000000,nadir_scale=1.25`, `900000,second_look_patches=0`);
+    ValueError naming a bad one."""
     pixels, *fields = text.split(",")
     changes: dict[str, float] = {}
-    numeric = {f.name for f in dataclasses.fields(ViewPlanConfig) if f.type in ("float", "float | None")}
+    kinds = {f.name: float if f.type in ("float", "float | None") else int
+             for f in dataclasses.fields(ViewPlanConfig) if f.type in ("float", "float | None", "int")}
     for field_text in fields:
         key, _, value = field_text.partition("=")
-        if key not in numeric:
+        if key not in kinds or key == "max_pixels":
             raise ValueError(f"{field_text!r}: not a numeric field of the view plan")
-        changes[key] = float(value)
+        changes[key] = kinds[key](value)
     return dataclasses.replace(DEFAULT_VIEW, max_pixels=int(pixels), **changes)  # type: ignore[arg-type]
 
 

@@ -3,8 +3,9 @@
 Score threshold, finite and positive boxes, mapping back to the frame through the view, rotated
 NMS about the camera's principal point, at most `max_detections`. `ModelRunner` chains it with
 `view_inputs` (the view's inputs: `views.prepare_input`, and a planned view's nadir view) and
-`merge_outputs` for callers that hold decoded frames (evaluation, benchmarks); the service's
-pipeline calls the same functions between its own decode and localisation.
+`merge_outputs`, and the second look (`second_look`, `contract.second_look`) for callers that hold
+decoded frames (evaluation, benchmarks); the service's pipeline calls the same functions between
+its own decode and localisation.
 """
 
 from __future__ import annotations
@@ -18,19 +19,21 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from contract import second_look as look
 from contract.metadata import ModelInfo, OperatingPoint
 from contract.model import RawOutputs
 from contract.views import (
     DEFAULT_VIEW,
     InputMapping,
     PlannedInput,
+    PolarInput,
     camera_view,
     mapping_layout,
     min_decoded_side,
     nadir_input,
     prepare_input,
 )
-from fisheye import FisheyeCamera, foot_points, rotated_nms
+from fisheye import FisheyeCamera, foot_points, rotated_iou, rotated_nms
 from fisheye.view_plan import ViewPlanConfig
 
 FloatArray = NDArray[np.float64]
@@ -112,6 +115,59 @@ def select_detections(raw: RawOutputs, mapping: InputMapping, principal_point: t
         kept = np.arange(min(len(found.scores), max_detections))
     return FrameDetections(found.boxes_cxcywh[kept], found.scores[kept], principal_point,
                            None if found.foot_px is None else found.foot_px[kept])
+
+
+def above(detections: FrameDetections, min_score: float) -> FrameDetections:
+    """The detections scoring at least `min_score` (scores are descending)."""
+    keep = detections.scores >= min_score
+    return dataclasses.replace(detections, boxes_cxcywh=detections.boxes_cxcywh[keep],
+                               scores=detections.scores[keep],
+                               foot_px=None if detections.foot_px is None else detections.foot_px[keep])
+
+
+def second_look(model: ContractModel, image: NDArray[np.uint8], scale_xy: tuple[float, float],
+                mapping: InputMapping, first: FrameDetections, nms_iou: float | None,
+                max_detections: int = 300) -> FrameDetections:
+    """The first look's detections (`first`, from `look.FIRST_LOOK_FLOOR` on) with what the
+    second look adds (`contract.second_look`): each patch about a small, uncertain detection run
+    through `model`, unwrapped from `image` (the decoded frame, `scale_xy` of the frame's size), its
+    people read back to frame px and kept where `look.patch_keeps` and `look.parts_of` allow; then
+    the rotated NMS again. A view without the second look returns `first` as it is."""
+    if not isinstance(mapping, PlannedInput) or not mapping.plan.second_look_patches:
+        return first
+    pp = first.principal_point
+    patches = look.plan_patches(mapping.plan, first.boxes_cxcywh, first.scores, pp)
+    if not patches:
+        return first
+    looked = {patch.detection for patch in patches}
+    others = first.boxes_cxcywh[[i for i in range(len(first.scores)) if i not in looked]]
+    boxes, scores = [first.boxes_cxcywh], [first.scores]
+    feet: list[FloatArray | None] = [first.foot_px]
+    for patch in patches:
+        patch_input = patch.grid.unwrap(image, scale_xy, border_value=model.info.pad_value)
+        found = select_detections(model.run(patch_input), PolarInput(patch.grid), pp, look.FIRST_LOOK_FLOOR,
+                                  nms_iou, max_detections)
+        keep = look.patch_keeps(patch, found.boxes_cxcywh)
+        keep[keep] = ~look.parts_of(patch.band, found.boxes_cxcywh[keep], others)
+        boxes.append(found.boxes_cxcywh[keep])
+        scores.append(found.scores[keep])
+        feet.append(None if found.foot_px is None else found.foot_px[keep])
+    all_boxes, all_scores = np.concatenate(boxes), np.concatenate(scores)
+    known = [f for f in feet if f is not None]
+    all_feet = np.concatenate(known) if len(known) == len(feet) else None
+    kept = (np.argsort(-all_scores, kind="stable") if nms_iou is None
+            else rotated_nms(all_boxes, all_scores, pp, nms_iou))[:max_detections]
+    kept_feet = None
+    if all_feet is not None and first.foot_px is not None:
+        # A patch's person whom the first look found too stands where the first look put them: the
+        # foot branch was trained at the bands' scales, not at the patches' twice that.
+        kept_feet = all_feet[kept]
+        overlap = rotated_iou(all_boxes[kept], first.boxes_cxcywh, pp)
+        best = overlap.argmax(axis=1)
+        same = overlap[np.arange(len(kept)), best] >= look.SAME_PERSON_IOU
+        kept_feet[same] = first.foot_px[best[same]]
+    return dataclasses.replace(first, boxes_cxcywh=all_boxes[kept], scores=all_scores[kept],
+                               foot_px=kept_feet)
 
 
 FOOT_FUSION_IOU = 0.65  # a candidate votes on a kept detection's foot from this IoU (input px) on
@@ -245,6 +301,9 @@ class FrameOutputs:
     raw: RawOutputs
     mapping: InputMapping
     principal_point: tuple[float, float]
+    # the decoded frame and its scale over the frame's size, where the view has the second look
+    image: NDArray[np.uint8] | None = None
+    scale_xy: tuple[float, float] = (1.0, 1.0)
 
 
 class ContractModel(Protocol):
@@ -292,7 +351,9 @@ class ModelRunner:
             images, mapping = view_inputs(info, reduced, camera, view)
             pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
             raw = run_view(self.model, images, mapping)
-            found.append(FrameOutputs(raw, mapping, pp))
+            looks = isinstance(mapping, PlannedInput) and mapping.plan.second_look_patches > 0
+            scale = (reduced.shape[1] / rgb.shape[1], reduced.shape[0] / rgb.shape[0])
+            found.append(FrameOutputs(raw, mapping, pp, reduced if looks else None, scale))
         return found
 
     def select(self, outputs: Sequence[FrameOutputs], min_score: float, nms_iou: float | None = None
@@ -302,8 +363,14 @@ class ModelRunner:
         for o in outputs:
             point = self.point(o.mapping)
             iou = point.nms_iou if nms_iou is None else nms_iou
-            detections = select_detections(o.raw, o.mapping, o.principal_point, min_score, iou,
-                                           self.max_detections)
+            if o.image is None:
+                detections = select_detections(o.raw, o.mapping, o.principal_point, min_score, iou,
+                                               self.max_detections)
+            else:
+                first = select_detections(o.raw, o.mapping, o.principal_point,
+                                          min(min_score, look.FIRST_LOOK_FLOOR), iou, self.max_detections)
+                detections = above(second_look(self.model, o.image, o.scale_xy, o.mapping, first, iou,
+                                               self.max_detections), min_score)
             found.append(dataclasses.replace(detections, view_point=point))
         return found
 

@@ -20,7 +20,8 @@ A model without `fishloc.nms_iou` (before 0.3.1) is run at 0.6, the value it was
 A planned model may carry its own points for some of the views the service plans
 (`fishloc.view_operating_points`, JSON: `{"2band+nadir": {"min_score": 0.346, "nms_iou": 0.3}}`,
 keyed by `fisheye.view_plan.ViewPlan.layout`), each chosen the same way on renders seen through that
-view; any other view runs at the model's own point.
+view; a view with the second look (`+look`) and no point of its own runs at the point of the
+same view without it; any other view runs at the model's own point.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ VIEW_POLAR = "polar"
 BOX_FORMATS = {VIEW_FISHEYE: "cxcywh_radius_aligned", VIEW_POLAR: "xyxy_polar"}
 LEGACY_NMS_IOU = 0.6  # the NMS IoU of a model whose metadata names none
 VIEW_POINTS_KEY = "fishloc.view_operating_points"
-LAYOUT_PATTERN = re.compile(r"[1-9][0-9]*band(\+nadir)?")  # fisheye.view_plan.view_layout's names
+LAYOUT_PATTERN = re.compile(r"[1-9][0-9]*band(\+nadir)?(\+look)?")  # fisheye.view_plan.view_layout's names
 
 
 class ModelError(RuntimeError):
@@ -118,7 +119,11 @@ class ModelInfo:
     def point_for(self, layout: str | None, nms_iou: float | None = None) -> OperatingPoint:
         """The operating point of a view of `layout` (None: not a planned view): its own where the
         model has one, else the model's; with `nms_iou` (a caller's) in place of the point's."""
-        own = dict(self.view_points).get(layout or "", OperatingPoint(self.default_min_score, self.nms_iou))
+        points = dict(self.view_points)
+        # a view with the second look takes the point of the same view without it where the model
+        # has none for it (a model released before the second look)
+        own = points.get(layout or "", points.get((layout or "").removesuffix("+look"),
+                                                   OperatingPoint(self.default_min_score, self.nms_iou)))
         return own if nms_iou is None else OperatingPoint(own.min_score, nms_iou)
 
     @property

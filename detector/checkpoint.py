@@ -166,7 +166,7 @@ def parse_view_point_args(values: list[str]) -> dict[str, list[float]]:
                                   f"and IOU in (0, 1], e.g. 2band+nadir=0.346,0.3 ({error})") from None
         if not LAYOUT_PATTERN.fullmatch(layout):
             raise CheckpointError(f"--view-point {value!r}: unknown layout {layout!r} "
-                                  "(1band, 2band, each with +nadir)")
+                                  "(1band, 2band, each with +nadir, then +look)")
         points[layout] = [score, iou]
     return points
 

@@ -253,6 +253,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--limit", type=int, default=None, help="evaluate the first N frames only")
     parser.add_argument("--max-view-pixels", type=int, default=None,
                         help="a planned model's view budget, as fishloc serve --max-view-pixels")
+    parser.add_argument("--second-look", type=int, default=None, metavar="PATCHES",
+                        help="a planned model's second look, as fishloc serve --second-look (0: none)")
     parser.add_argument("--assumed-camera", choices=ASSUMED_LENSES, default="short-side",
                         help="camera of frames without a calibration (CEPDOF/WEPDTOF files): the 180° "
                              "circle that fills the frame's shorter side (default, DESIGN.md), or the "
@@ -279,8 +281,12 @@ def run(args: argparse.Namespace) -> int:
     if args.limit is not None:
         frames = frames[:args.limit]
     extra: dict[str, Any] = {}
-    view = DEFAULT_VIEW if args.max_view_pixels is None else dataclasses.replace(
-        DEFAULT_VIEW, max_pixels=args.max_view_pixels)
+    try:
+        asked = (("max_pixels", args.max_view_pixels), ("second_look_patches", args.second_look))
+        view = dataclasses.replace(DEFAULT_VIEW, **{name: v for name, v in asked if v is not None})
+    except ValueError as error:
+        print(f"fishloc eval: {error}", file=sys.stderr)
+        return 2
     if args.operating_point:
         best, evaluation, points = choose_operating_point(model, frames, view=view)
         print(json.dumps({"operating_point": describe([best])[0], "layouts": evaluation.metrics["layouts"]}))

@@ -67,6 +67,10 @@ class ViewReference:
         return self.rows * (self.turn_columns + self.overlap)
 
 
+MAX_SECOND_LOOK_PATCHES = 64
+SECOND_LOOK_PATCH_PX = (96, 256)  # a patch's side lies within these (multiples of 32)
+
+
 @dataclass(frozen=True)
 class ViewPlanConfig:
     """What a plan aims at. `scales` are the band scales it may use (1.0: the trained strip), the
@@ -120,6 +124,15 @@ class ViewPlanConfig:
     # (docs/DETECTOR.md, "Other runtimes and an area-averaged unwrap"): a design, not the rule.
     # 1 (the default): one sample.
     unwrap_samples: int = 1
+    # The second look (`contract.second_look`): up to this many of a frame's small, uncertain
+    # detections seen again, each in a patch of its band at `second_look_zoom` times the band's
+    # scale, where a person of 30 x 20 band px (a seated one at the rim) becomes twice that. 12
+    # patches at 2x were chosen on the validation renders over 6 and 24, 1.5x and 2.5x, and with
+    # the scenes4 and Lunch3 frames beside them (docs/DETECTOR.md, "A second look"). Its patches
+    # take what `max_pixels` leaves beside the view: nothing at the default budget, whose time is
+    # the frame's; 0: none at any budget.
+    second_look_patches: int = 12
+    second_look_zoom: float = 2.0
 
     def __post_init__(self) -> None:
         if not self.scales or any(not (0.25 <= s <= 4.0) for s in self.scales) or (
@@ -139,6 +152,11 @@ class ViewPlanConfig:
         if self.outer_row_scale is not None and not self.scales[0] <= self.outer_row_scale <= self.scales[-1]:
             raise ValueError(f"outer_row_scale must lie within the scales {self.scales}, got "
                              f"{self.outer_row_scale}")
+        looks = 0 <= self.second_look_patches <= MAX_SECOND_LOOK_PATCHES
+        if not (looks and 1.0 < self.second_look_zoom <= 4.0):
+            raise ValueError(f"second_look_patches must lie in [0, {MAX_SECOND_LOOK_PATCHES}] and "
+                             f"second_look_zoom in (1, 4], got {self.second_look_patches} and "
+                             f"{self.second_look_zoom}")
         if not 1 <= self.unwrap_samples <= 4:
             raise ValueError(f"unwrap_samples must lie in [1, 4], got {self.unwrap_samples}")
         if self.nadir_strip_from is not None and not 0 < self.nadir_strip_from < self.nadir_view_fraction:
@@ -212,6 +230,11 @@ class ViewPlan:
     # Input px of the view the camera's people ask for (every band at the scale it wants, and the
     # nadir view), before any budget: a budget of at least this plans it whole.
     wanted_pixels: int = 0
+    # The second look's patches at most (`ViewPlanConfig.second_look_patches`; 0: none), their
+    # zoom over their band's scale, and the input px they may take in all: what the budget leaves.
+    second_look_patches: int = 0
+    second_look_zoom: float = 2.0
+    second_look_pixels: int = 0
 
     @property
     def owned_px(self) -> tuple[tuple[float, float], ...]:
@@ -232,7 +255,7 @@ class ViewPlan:
     def layout(self) -> str:
         """What the plan runs, as a model names the views it has an operating point for
         (`contract.metadata.ModelInfo.view_points`): `1band`, `2band`, each `+nadir` with one."""
-        return view_layout(len(self.bands), self.nadir is not None)
+        return view_layout(len(self.bands), self.nadir is not None, self.second_look_patches > 0)
 
     def public(self) -> dict[str, object]:
         """The plan as `GET /v1/cameras/{id}` reports it."""
@@ -249,13 +272,17 @@ class ViewPlan:
             "nadir": None if self.nadir is None else {
                 "input_wh": [self.nadir.side, self.nadir.side], "half_px": round(self.nadir.half_px, 1),
                 "scale": round(self.nadir.scale, 4), "owned_radius_px": round(self.nadir.owned_px, 1)},
+            "second_look": None if not self.second_look_patches else {
+                "max_patches": self.second_look_patches, "zoom": self.second_look_zoom,
+                "patch_px": list(SECOND_LOOK_PATCH_PX), "max_pixels": self.second_look_pixels},
             "notes": list(self.notes),
         }
 
 
-def view_layout(bands: int, nadir: bool) -> str:
-    """The name of a plan of `bands` bands, with or without the nadir view (`ViewPlan.layout`)."""
-    return f"{bands}band" + ("+nadir" if nadir else "")
+def view_layout(bands: int, nadir: bool, second_look: bool = False) -> str:
+    """The name of a plan of `bands` bands, with or without the nadir view, with or without the
+    second look (`ViewPlan.layout`): `1band`, `2band+nadir`, `1band+nadir+look`, ..."""
+    return f"{bands}band" + ("+nadir" if nadir else "") + ("+look" if second_look else "")
 
 
 def _ceil_to(value: float, step: int) -> int:
@@ -500,8 +527,15 @@ def plan_view(camera: FisheyeCamera, reference: ViewReference | None = None,
     if ring > edge + 0.5:
         notes.append(f"the frame cuts the image circle ({ring:.0f} px radius, {edge:.0f} px to the nearest "
                      f"edge): the view reaches {top:.0f} px, the frame's corners included")
+    pixels = canvas[0] * canvas[1] + (nadir.side ** 2 if nadir is not None else 0)
+    look_pixels = config.max_pixels - pixels if config.second_look_patches else 0
+    if config.second_look_patches and look_pixels < SECOND_LOOK_PATCH_PX[0] ** 2:
+        notes.append(f"budget {config.max_pixels} px binds: no second look (it leaves {look_pixels} px, a "
+                     f"patch takes {SECOND_LOOK_PATCH_PX[0] ** 2} or more)")
+        look_pixels = 0
     return ViewPlan(grids, offsets, canvas, tuple(bands), smallest, reference.pixels, tuple(notes), nadir,
-                    wanted_pixels)
+                    wanted_pixels, config.second_look_patches if look_pixels else 0, config.second_look_zoom,
+                    look_pixels)
 
 
 def _strip_from(bands: list[ViewBand], camera: FisheyeCamera, rows_per_px: float, config: ViewPlanConfig

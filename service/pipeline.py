@@ -2,7 +2,8 @@
 
 decode (reduced-scale JPEG where the model input allows) -> the model's view of the frame
 (letterbox or polar unwrap, `contract.views`) -> ONNX model -> score threshold, boxes back to frame
-pixels and rotated NMS about the camera's own principal point (`contract.detect`) -> foot points ->
+pixels and rotated NMS about the camera's own principal point (`contract.detect`), where the view
+has it the second look at the small, uncertain detections (`contract.second_look`) -> foot points ->
 floor and site positions -> the camera's masks (a foot point inside one drops its detection).
 Torch-free: only numpy, OpenCV, onnxruntime, `fisheye` and `contract`.
 """
@@ -28,7 +29,9 @@ from contract import (
     view_inputs,
 )
 from contract import select_detections as select_raw
-from contract.views import DEFAULT_VIEW, camera_view, mapping_layout, view_plan, view_reference
+from contract.detect import above, second_look
+from contract.second_look import FIRST_LOOK_FLOOR
+from contract.views import DEFAULT_VIEW, PlannedInput, camera_view, mapping_layout, view_plan, view_reference
 from fisheye import FisheyeCamera, cxcywh_to_corners, foot_points, radial_angles_rad
 from fisheye.view_plan import ViewPlan, ViewPlanConfig, ViewPlanError, may_have_nadir, nadir_side
 from service.frame_decode import DecodedFrame, FrameError, check_frame_size, decode_frame, read_header
@@ -150,10 +153,18 @@ class Pipeline:
         preprocessed = time.perf_counter()
 
         raw = run_view(self.model, images, mapping)
-        inferred = time.perf_counter()
-
         threshold = self.point(mapping_layout(mapping)).min_score if min_score is None else float(min_score)
-        kept = self.select(raw, mapping, threshold, frame_camera)
+        if isinstance(mapping, PlannedInput) and mapping.plan.second_look_patches:
+            # the second look's patches run on the model too: their time counts as inference
+            first = self.select(raw, mapping, min(threshold, FIRST_LOOK_FLOOR), frame_camera)
+            scale = (frame.rgb.shape[1] / header.size_wh[0], frame.rgb.shape[0] / header.size_wh[1])
+            kept = above(second_look(self.model, frame.rgb, scale, mapping, first,
+                                     self.point(mapping_layout(mapping)).nms_iou, self.config.max_detections),
+                         threshold)
+            inferred = time.perf_counter()
+        else:
+            inferred = time.perf_counter()
+            kept = self.select(raw, mapping, threshold, frame_camera)
         detections, masked = drop_masked(
             localize(kept.boxes_cxcywh, kept.scores, frame_camera, kept.foot_px), frame_camera)
         done = time.perf_counter()

@@ -58,6 +58,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="largest model input of a camera's planned view, width x height (a planned "
                              "model only; env FISHLOC_MAX_VIEW_PIXELS; default 900000), unless the "
                              "camera's record sets its own (max_view_pixels)")
+    parser.add_argument("--second-look", type=int, metavar="PATCHES",
+                        help="the second look: up to this many of a frame's small, uncertain detections "
+                             "seen again at twice their band's scale (a planned model only; env "
+                             "FISHLOC_SECOND_LOOK; default 12; 0: none)")
     parser.add_argument("--max-camera-view-pixels", type=int, metavar="PIXELS",
                         help="the largest budget a camera's record may set for its view (env "
                              "FISHLOC_MAX_CAMERA_VIEW_PIXELS; default 4000000)")
@@ -66,9 +70,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def settings_from_args(args: argparse.Namespace) -> Settings:
     """Settings from the environment with the flags that were given on top."""
     names = ("host", "http_port", "grpc_port", "model", "cameras", "database", "threads", "onnx_spinning",
-             "demo_camera",
-             "max_view_pixels", "max_camera_view_pixels", "mqtt", "mqtt_prefix", "history_retention_days",
-             "sites_bus")
+             "demo_camera", "max_view_pixels", "max_camera_view_pixels", "second_look", "mqtt", "mqtt_prefix",
+             "history_retention_days", "sites_bus")
     overrides = {name: getattr(args, name) for name in names if getattr(args, name, None) is not None}
     return Settings(**overrides)
 

@@ -39,7 +39,10 @@ def test_a_model_spec_names_the_budget_and_other_fields_of_the_plan() -> None:
     view = view_from_spec("1000000,nadir_scale=1.25,nadir_strip_from=0.1")
     assert view.max_pixels == 1_000_000 and view.nadir_scale == 1.25 and view.nadir_strip_from == 0.1
     assert view_from_spec("4000000").nadir_scale == DEFAULT_VIEW.nadir_scale
-    for bad in ("1000000,scales=2", "1000000,size=3", "many"):
+    without = view_from_spec("900000,second_look_patches=0")  # an integer field: the second look off
+    assert without.second_look_patches == 0 and DEFAULT_VIEW.second_look_patches > 0
+    for bad in ("1000000,scales=2", "1000000,size=3", "many", "900000,second_look_patches=1.5",
+                "900000,max_pixels=5"):
         with pytest.raises(ValueError):
             view_from_spec(bad)
 

@@ -57,9 +57,10 @@ def _coordinate_nodes(planned: bool, height: int, width: int) -> list[onnx.NodeP
 
 
 def build_polar_double(foot: bool = False, bad_foot: bool = False,
-                       metadata: dict[str, str] | None = None, planned: bool = False) -> onnx.ModelProto:
+                       metadata: dict[str, str] | None = None, planned: bool = False,
+                       score: float = SCORE) -> onnx.ModelProto:
     """The double; `bad_foot` gives it a `foot` output of 4 numbers per box (the contract says 2);
-    `planned`, an input of any height and width (`fishloc.view_planned`)."""
+    `planned`, an input of any height and width (`fishloc.view_planned`); `score` its box's score."""
     width = WIDTH + OVERLAP
     f32 = np.float32
     half = np.array([-BOX_WH[0] / 2, -BOX_WH[1] / 2, BOX_WH[0] / 2, BOX_WH[1] / 2], dtype=f32)
@@ -67,7 +68,7 @@ def build_polar_double(foot: bool = False, bad_foot: bool = False,
         *_coordinate_nodes(planned, HEIGHT, width), _const("half", half[None, None]),
         _const("axes_c", np.array([3], dtype=np.int64)), _const("axes_hw", np.array([1, 2], dtype=np.int64)),
         _const("ax1", np.array([1], dtype=np.int64)), _const("bright", np.array(600.0, dtype=f32)),
-        _const("eps", np.array(1e-6, dtype=f32)), _const("score", np.array([[SCORE]], dtype=f32)),
+        _const("eps", np.array(1e-6, dtype=f32)), _const("score", np.array([[score]], dtype=f32)),
         _const("foot_dy", np.array([[[0.0, BOX_WH[1] / 2]]], dtype=f32)),
         helper.make_node("Cast", ["image"], ["imgf"], to=TensorProto.FLOAT),
         helper.make_node("ReduceSum", ["imgf", "axes_c"], ["gray"], keepdims=0),

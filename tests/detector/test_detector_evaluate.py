@@ -102,3 +102,14 @@ def test_eval_takes_the_assumed_camera_of_uncalibrated_frames(tmp_path: Path, as
                  "--assumed-camera", assumed]) == 0
     metrics = json.loads(out.read_text())
     assert metrics["assumed_camera"] == assumed and metrics["mPE"] is None
+
+
+def test_eval_refuses_a_second_look_out_of_range(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from models import DEFAULT_MODEL_PATH
+    from service.cli import main
+
+    data = _cepdof_file(tmp_path)
+    out = tmp_path / "metrics.json"
+    assert main(["eval", "--model", str(DEFAULT_MODEL_PATH), "--data", str(data), "--json", str(out),
+                 "--second-look", "99"]) == 2
+    assert "second_look_patches must lie in [0, 64]" in capsys.readouterr().err and not out.exists()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import argparse
+import contextlib
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -13,6 +15,7 @@ from service_live_server import LiveServer
 from fisheye import FisheyeCamera, load_camera
 from models import DEMO_CAMERA_PATH
 from service.core.config import Settings
+from service.runner import InferenceRunner
 
 
 @pytest.fixture(scope="session")
@@ -44,3 +47,26 @@ def settings_for(double_model_path: Path, tmp_path: Path) -> Callable[..., Setti
 def live_server(settings_for: Callable[..., Settings]) -> Iterator[LiveServer]:
     with LiveServer(settings_for()) as server:
         yield server
+
+
+@pytest.fixture
+def serve_runner(double_model_path: Path
+                 ) -> Callable[[list[str]], contextlib.AbstractContextManager[InferenceRunner]]:
+    """The runner `fishloc serve` builds from its flags (and the environment), the double model on
+    one thread: `with serve_runner(["--flag", "value"]) as runner: ...`, closed after."""
+    from service.core.metrics import ServiceMetrics
+    from service.runner import build_runner
+    from service.serve_cli import add_arguments, settings_from_args
+
+    @contextlib.contextmanager
+    def build(argv: list[str]) -> Iterator[InferenceRunner]:
+        parser = argparse.ArgumentParser()
+        add_arguments(parser)
+        args = parser.parse_args(["--model", str(double_model_path), "--threads", "1", *argv])
+        runner = build_runner(settings_from_args(args), ServiceMetrics())
+        try:
+            yield runner
+        finally:
+            runner.close()
+
+    return build

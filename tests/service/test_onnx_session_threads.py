@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-import argparse
+from collections.abc import Callable
+from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
 
@@ -10,6 +11,7 @@ import numpy as np
 import pytest
 
 from contract import OnnxModel, SessionThreads
+from service.runner import InferenceRunner
 
 
 def _spins(session: Any) -> str:
@@ -78,23 +80,14 @@ def test_an_unknown_policy_is_refused() -> None:
     ([], {"FISHLOC_ONNX_SPINNING": "off"}, "0", False),
 ])
 def test_serve_takes_the_spinning_policy_from_its_flag_or_the_environment(
-        double_model_path: Path, monkeypatch: pytest.MonkeyPatch, argv: list[str], env: dict[str, str],
-        spinning: str, second_set: bool) -> None:
-    from service.core.metrics import ServiceMetrics
-    from service.runner import build_runner
-    from service.serve_cli import add_arguments, settings_from_args
-
+        serve_runner: Callable[[list[str]], AbstractContextManager[InferenceRunner]],
+        monkeypatch: pytest.MonkeyPatch, argv: list[str], env: dict[str, str], spinning: str,
+        second_set: bool) -> None:
     for name, value in env.items():
         monkeypatch.setenv(name, value)
-    parser = argparse.ArgumentParser()
-    add_arguments(parser)
-    args = parser.parse_args(["--model", str(double_model_path), "--threads", "1", *argv])
-    runner = build_runner(settings_from_args(args), ServiceMetrics())
-    try:
+    with serve_runner(argv) as runner:
         model = runner.pipeline.model
         assert _spins(model.session) == spinning and (model._spinning is not None) is second_set
-    finally:
-        runner.close()
 
 
 def test_thread_counts_must_be_positive() -> None:

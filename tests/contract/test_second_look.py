@@ -1,0 +1,234 @@
+"""The second look: which detections get a patch, the patch's geometry, what a patch may add, how
+a view names and reports it, and the pipeline running it (with the polar test double)."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+from polar_double import BOX_WH, METADATA, save_polar_double
+
+from contract import (
+    FrameDetections,
+    ModelInfo,
+    OnnxModel,
+    OperatingPoint,
+    RawOutputs,
+    SessionThreads,
+    parse_metadata,
+)
+from contract import second_look as look
+from contract.detect import second_look
+from contract.views import DEFAULT_VIEW, PlannedInput, view_plan
+from fisheye import camera_from_dict
+from fisheye.view_plan import SECOND_LOOK_PATCH_PX, ViewPlanConfig
+from service.pipeline import Pipeline, PipelineConfig
+
+CAMERA = {"id": "cam", "altitude_m": 3.0, "image_size": [1024, 1024], "principal_point": [511.5, 511.5],
+          "focal_px": [320.0, 320.0], "kb": [1.0]}
+ONE_BAND = dataclasses.replace(DEFAULT_VIEW, scales=(1.0,), nadir_fraction=None)
+
+
+def _info(tmp_path: Path, **kwargs: object) -> ModelInfo:
+    path = save_polar_double(tmp_path / "planned.onnx", planned=True, **kwargs)
+    return OnnxModel(path, SessionThreads(1)).info
+
+
+def _box(pp: np.ndarray, radius: float, angle: float, along: float, across: float) -> np.ndarray:
+    """A radius-aligned frame box at `radius` px and `angle` of `along` x `across` px."""
+    centre = pp + radius * np.array([np.cos(angle), np.sin(angle)])
+    return np.array([[centre[0], centre[1], across, along]])
+
+
+def test_patches_go_to_small_uncertain_detections_at_the_zoom_of_their_band(tmp_path: Path) -> None:
+    camera = camera_from_dict(CAMERA)
+    plan = view_plan(_info(tmp_path), camera, ONE_BAND)
+    band = look.band_grids(plan)[0]
+    pp = np.asarray(camera.principal_point)
+    # 30 frame px along at radius 300 is 30 * rows/px band rows: well under MAX_ALONG_PX
+    small = _box(pp, 300.0, 0.7, 30.0, 14.0)
+    long_ = _box(pp, 300.0, 2.0, 1.2 * look.MAX_ALONG_PX / band.px_per_radius_px, 14.0)
+    over_centre = _box(pp, 5.0, 0.0, 60.0, 60.0)
+    boxes = np.concatenate([small, small, long_, over_centre])
+    scores = np.array([0.9, 0.5, 0.4, 0.3])  # the sure one is not looked at again
+    patches = look.plan_patches(plan, boxes, scores, (float(pp[0]), float(pp[1])))
+    assert [p.detection for p in patches] == [1]
+    grid = patches[0].grid
+    assert grid.width == round(band.width * plan.second_look_zoom)
+    assert grid.px_per_radius_px == pytest.approx(band.px_per_radius_px * plan.second_look_zoom, rel=1e-6)
+    width, height = grid.strip_wh
+    assert all(SECOND_LOOK_PATCH_PX[0] <= side <= SECOND_LOOK_PATCH_PX[1] and side % 32 == 0
+               for side in (width, height))
+    centre = grid.frame_to_strip(small[:, :2])[0]
+    np.testing.assert_allclose(centre, [(width - 1) / 2, (height - 1) / 2], atol=1.0)
+    assert look.plan_patches(dataclasses.replace(plan, second_look_patches=0), boxes, scores,
+                             (float(pp[0]), float(pp[1]))) == []
+
+
+def test_at_most_the_planned_number_of_patches_best_scores_first(tmp_path: Path) -> None:
+    camera = camera_from_dict(CAMERA)
+    plan = view_plan(_info(tmp_path), camera, dataclasses.replace(ONE_BAND, second_look_patches=3))
+    pp = np.asarray(camera.principal_point)
+    boxes = np.concatenate([_box(pp, 350.0, k * 0.5, 30.0, 14.0) for k in range(6)])
+    scores = np.linspace(0.6, 0.1, 6)
+    patches = look.plan_patches(plan, boxes, scores, (float(pp[0]), float(pp[1])))
+    assert [p.detection for p in patches] == [0, 1, 2]
+
+
+def test_a_patch_adds_whole_central_short_boxes_that_are_no_part_of_a_larger_one(tmp_path: Path) -> None:
+    camera = camera_from_dict(CAMERA)
+    plan = view_plan(_info(tmp_path), camera, ONE_BAND)
+    pp = np.asarray(camera.principal_point)
+    band = look.band_grids(plan)[0]
+    target = _box(pp, 300.0, 0.7, 30.0, 14.0)
+    patch = look.plan_patches(plan, target, np.array([0.5]), (float(pp[0]), float(pp[1])))[0]
+    width, height = patch.grid.strip_wh
+    # boxes given in the patch's strip, read back to the frame through it
+    central = patch.grid.polar_to_radius_aligned(np.array([[width / 2 - 8, height / 2 - 20, width / 2 + 8,
+                                                            height / 2 + 20]]))
+    at_edge = patch.grid.polar_to_radius_aligned(np.array([[0.0, height / 2 - 20, 16.0, height / 2 + 20]]))
+    keeps = look.patch_keeps(patch, np.concatenate([central, at_edge]))
+    assert keeps.tolist() == [True, False]
+    long_in_band = _box(pp, 300.0, 0.7, 1.6 * look.MAX_ALONG_PX / band.px_per_radius_px, 10.0)
+    assert not look.patch_keeps(patch, long_in_band)[0]
+    larger = central * np.array([1, 1, 2, 2])  # the same centre, twice the size each way
+    elsewhere = _box(pp, 300.0, 2.5, 2 * central[0, 3], 2 * central[0, 2])
+    assert look.parts_of(band, central, larger).tolist() == [True]
+    assert look.parts_of(band, central, elsewhere).tolist() == [False]
+    assert look.parts_of(band, central, np.zeros((0, 4))).tolist() == [False]
+
+
+def test_the_view_names_and_reports_its_second_look(tmp_path: Path) -> None:
+    # the double's strip (288 x 64) leaves most of the default budget to the second look
+    info = _info(tmp_path)
+    camera = camera_from_dict(CAMERA)
+    plan = view_plan(info, camera, DEFAULT_VIEW)
+    assert plan.layout.endswith("+look") and plan.second_look_patches == DEFAULT_VIEW.second_look_patches
+    public = plan.public()["second_look"]
+    assert public == {"max_patches": 12, "zoom": 2.0, "patch_px": list(SECOND_LOOK_PATCH_PX),
+                      "max_pixels": DEFAULT_VIEW.max_pixels - plan.pixels}
+    without = view_plan(info, camera, dataclasses.replace(DEFAULT_VIEW, second_look_patches=0))
+    assert without.public()["second_look"] is None and not without.layout.endswith("+look")
+
+
+def test_the_second_look_takes_what_the_budget_leaves() -> None:
+    # The shipped model's view of the demo camera fills the default budget: no second look there,
+    # and the plan says why; a larger budget leaves its patches the difference.
+    from fisheye import load_camera
+    from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
+
+    info = OnnxModel(DEFAULT_MODEL_PATH, SessionThreads(1)).info
+    camera = load_camera(DEMO_CAMERA_PATH)
+    default = view_plan(info, camera, DEFAULT_VIEW)
+    assert default.layout == "1band+nadir" and default.second_look_patches == 0
+    assert any("no second look" in note for note in default.notes)
+    larger = view_plan(info, camera, dataclasses.replace(DEFAULT_VIEW, max_pixels=1_200_000))
+    assert larger.layout == "1band+nadir+look" and larger.pixels == default.pixels
+    assert larger.second_look_pixels == 1_200_000 - larger.pixels
+    # patches beyond what is left are left out, a smaller one after them may still fit
+    pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
+    band = look.band_grids(larger)[0]
+    along = 30.0 / band.px_per_radius_px  # 30 band rows
+    boxes = np.concatenate([_box(np.asarray(pp), 600.0, k * 0.4, along, 40.0) for k in range(12)])
+    every = look.plan_patches(dataclasses.replace(larger, second_look_pixels=10**9), boxes,
+                              np.full(12, 0.4), pp)
+    sizes = [p.grid.strip_wh[0] * p.grid.strip_wh[1] for p in every]
+    budget = sum(sizes[:3])
+    some = look.plan_patches(dataclasses.replace(larger, second_look_pixels=budget), boxes,
+                             np.full(12, 0.4), pp)
+    assert len(every) == 12 and 3 <= len(some) < 12
+    assert sum(p.grid.strip_wh[0] * p.grid.strip_wh[1] for p in some) <= budget
+
+
+@pytest.mark.parametrize("change", [{"second_look_patches": -1}, {"second_look_patches": 65},
+                                    {"second_look_zoom": 1.0}, {"second_look_zoom": 4.5}])
+def test_a_bad_second_look_is_refused(change: dict[str, float]) -> None:
+    with pytest.raises(ValueError, match="second_look"):
+        ViewPlanConfig(**change)  # type: ignore[arg-type]
+
+
+def test_a_view_with_the_second_look_takes_its_own_point_or_that_of_the_view_without_it() -> None:
+    props = {**METADATA, "fishloc.view_planned": "1",
+             "fishloc.view_operating_points": '{"1band+nadir": {"min_score": 0.24, "nms_iou": 0.35}}'}
+    older = parse_metadata(props, "older.onnx")
+    assert older.point_for("1band+nadir+look") == OperatingPoint(0.24, 0.35)
+    assert older.point_for("2band+look") == OperatingPoint(older.default_min_score, older.nms_iou)
+    own = '{"1band+nadir": {"min_score": 0.24, "nms_iou": 0.35}, "1band+nadir+look": {"min_score": 0.3, ' \
+          '"nms_iou": 0.3}}'
+    newer = parse_metadata({**props, "fishloc.view_operating_points": own}, "newer.onnx")
+    assert newer.point_for("1band+nadir+look") == OperatingPoint(0.3, 0.3)
+
+
+def _disc_frame(camera: object, xy_m: tuple[float, float]) -> tuple[bytes, np.ndarray]:
+    import cv2
+
+    uv = camera.floor_to_pixels(np.array([xy_m]))[0]  # type: ignore[attr-defined]
+    frame = np.full((1024, 1024, 3), 30, dtype=np.uint8)
+    cv2.circle(frame, (round(uv[0]), round(uv[1])), 6, (255, 255, 255), -1)
+    ok, data = cv2.imencode(".png", frame)
+    assert ok
+    return data.tobytes(), uv
+
+
+def test_the_pipeline_adds_what_the_patch_finds_at_its_zoom(tmp_path: Path) -> None:
+    # The double boxes the bright disc with BOX_WH input px whatever the input: in the patch, at
+    # twice the band's rows and columns a frame px, that box is half the first look's in the frame,
+    # on the same centre. Its score (0.5) is under BELOW_SCORE, so the first look's box gets a patch.
+    path = save_polar_double(tmp_path / "planned.onnx", planned=True, score=0.5)
+    model = OnnxModel(path, SessionThreads(1))
+    camera = camera_from_dict(CAMERA)
+    data, uv = _disc_frame(camera, (2.0, 1.5))
+    looking = Pipeline(model, PipelineConfig(view=ONE_BAND)).detect(data, camera, min_score=0.3).detections
+    plain = Pipeline(model, PipelineConfig(view=dataclasses.replace(ONE_BAND, second_look_patches=0))).detect(
+        data, camera, min_score=0.3).detections
+    assert len(plain.scores) == 1 and len(looking.scores) == 2
+    first = plain.cxcywh[0]
+    np.testing.assert_allclose(looking.cxcywh[0], first, atol=1e-3)  # the first look's box stays
+    second = looking.cxcywh[1]
+    # on the disc, as the first look's box is (the patch's columns are finer: it may be nearer)
+    assert np.hypot(*(second[:2] - uv)) <= max(np.hypot(*(first[:2] - uv)), 1.5)
+    np.testing.assert_allclose(second[2:], first[2:] / 2, rtol=0.05)
+    assert BOX_WH[1] / 2 < look.MAX_ALONG_PX
+    # a threshold over the double's score leaves nothing, looked at or not
+    above_all = Pipeline(model, PipelineConfig(view=ONE_BAND)).detect(data, camera, min_score=0.6)
+    assert len(above_all.detections) == 0
+
+
+class _PatchModel:
+    """A model that answers every patch with one box, given in that patch's px, and its foot 30 px
+    below the box's bottom: a stand-in for the network, to check what the second look keeps."""
+
+    def __init__(self, info: ModelInfo, box_xyxy: np.ndarray, score: float) -> None:
+        self.info, self.box, self.score = info, box_xyxy, score
+
+    def run(self, image: np.ndarray) -> RawOutputs:
+        foot = np.array([[(self.box[0] + self.box[2]) / 2, self.box[3] + 30.0]], dtype=np.float32)
+        return RawOutputs(self.box[None].astype(np.float32), np.array([self.score], dtype=np.float32), foot)
+
+    def run_boxes(self, image: np.ndarray) -> RawOutputs:
+        return self.run(image)
+
+
+@pytest.mark.parametrize("same_person_iou", [look.SAME_PERSON_IOU, 1.1])
+def test_a_person_both_looks_found_stands_at_the_first_looks_foot(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, same_person_iou: float) -> None:
+    monkeypatch.setattr(look, "SAME_PERSON_IOU", same_person_iou)
+    info = _info(tmp_path)
+    camera = camera_from_dict(CAMERA)
+    plan = view_plan(info, camera, ONE_BAND)
+    pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
+    first_box = _box(np.asarray(pp), 300.0, 0.7, 30.0, 14.0)
+    first = FrameDetections(first_box, np.array([0.5]), pp, foot_px=np.array([[700.0, 800.0]]))
+    patch = look.plan_patches(plan, first_box, first.scores, pp)[0]
+    # the patch sees the same person, a little more sure of them
+    model = _PatchModel(info, patch.grid.radius_aligned_to_polar(first_box)[0], 0.6)
+    image = np.zeros((1024, 1024, 3), dtype=np.uint8)
+    found = second_look(model, image, (1.0, 1.0), PlannedInput(plan), first, 0.35)
+    assert found.scores.tolist() == pytest.approx([0.6])  # the patch's box won the NMS
+    np.testing.assert_allclose(found.boxes_cxcywh[0], first_box[0], atol=0.5)
+    if same_person_iou <= 1.0:
+        np.testing.assert_allclose(found.foot_px[0], [700.0, 800.0])
+    else:  # no one is the same person: the patch's own foot, 30 patch rows below its box
+        assert np.hypot(*(found.foot_px[0] - [700.0, 800.0])) > 50
