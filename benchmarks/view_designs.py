@@ -32,7 +32,7 @@ from contract import ModelError, ModelRunner, OnnxModel, SessionThreads
 from contract.detect import ContractModel
 from contract.metadata import OperatingPoint
 from contract.views import DEFAULT_VIEW, view_plan
-from fisheye.view_plan import ViewPlanConfig
+from fisheye.view_plan import SECOND_LOOK_FULL_PIXELS, ViewPlanConfig
 
 # The designs compared for 0.6.0: the trained strip, and two bands (the rim at 1.5x) with the inner
 # band over the whole disc or reaching 0.6 of a standing adult past the split, or at 0.75x; then
@@ -40,6 +40,7 @@ from fisheye.view_plan import ViewPlanConfig
 # 0.35 of the image circle's radius at 1.25x to 1.95x the strip's radial scale; then the strip
 # starting 0.1 or 0.2 of the radius out where the nadir view shows the disc within.
 BANDS = dataclasses.replace(DEFAULT_VIEW, max_pixels=4_000_000, nadir_fraction=None)
+LOOKING = dataclasses.replace(DEFAULT_VIEW, second_look_pixels=SECOND_LOOK_FULL_PIXELS)
 DESIGNS: dict[str, ViewPlanConfig] = {
     "strip (one band, 1.0x)": dataclasses.replace(DEFAULT_VIEW, scales=(1.0,), nadir_fraction=None),
     "two bands 1.0x / 1.5x, inner = whole disc": dataclasses.replace(BANDS, band_margin=None),
@@ -75,14 +76,16 @@ DESIGNS: dict[str, ViewPlanConfig] = {
         DEFAULT_VIEW, unwrap_samples=2),
     "two bands 1.0x / 1.5x + nadir view, 2 x 2 samples a px": dataclasses.replace(
         DEFAULT_VIEW, max_pixels=4_000_000, unwrap_samples=2),
-    # 0.8.0: the second look (`contract.second_look`) takes what each budget above leaves (none at
-    # the default's); at 1.2M it has 307 000 px beside the default view; without it, 0.7.3's views
-    "the default view + second look, 1.2M": dataclasses.replace(DEFAULT_VIEW, max_pixels=1_200_000),
-    **{f"the default view + second look of {patches} patches at {zoom:g}x, 1.2M": dataclasses.replace(
-        DEFAULT_VIEW, max_pixels=1_200_000, second_look_patches=patches, second_look_zoom=zoom)
+    # 0.8.0: the second look (`contract.second_look`, off in every view above), its patches bounded
+    # by their count alone (their px at most SECOND_LOOK_FULL_PIXELS), or within 300 000 px
+    "the default view + second look": LOOKING,
+    "the default view + second look within 300 000 px": dataclasses.replace(
+        LOOKING, second_look_pixels=300_000),
+    **{f"the default view + second look of {patches} patches at {zoom:g}x": dataclasses.replace(
+        LOOKING, second_look_pixels=patches * 256 * 256, second_look_patches=patches, second_look_zoom=zoom)
        for patches, zoom in ((6, 2.0), (24, 2.0), (12, 1.5), (12, 2.5))},
-    "two bands 1.0x / 1.5x + nadir view, without the second look": dataclasses.replace(
-        DEFAULT_VIEW, max_pixels=4_000_000, second_look_patches=0),
+    "two bands 1.0x / 1.5x + nadir view + second look": dataclasses.replace(
+        DEFAULT_VIEW, max_pixels=4_000_000, second_look_pixels=SECOND_LOOK_FULL_PIXELS),
 }
 FIGURES = ("AP50", "precision", "recall", "AP_far", "recall_nadir", "mPE", "mPE_reported")
 

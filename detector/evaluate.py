@@ -253,8 +253,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--limit", type=int, default=None, help="evaluate the first N frames only")
     parser.add_argument("--max-view-pixels", type=int, default=None,
                         help="a planned model's view budget, as fishloc serve --max-view-pixels")
-    parser.add_argument("--second-look", type=int, default=None, metavar="PATCHES",
-                        help="a planned model's second look, as fishloc serve --second-look (0: none)")
+    parser.add_argument("--second-look", type=int, default=None, metavar="PIXELS",
+                        help="a planned model's second look, as fishloc serve --second-look (px of its "
+                             "patches in all; default 0: none)")
     parser.add_argument("--assumed-camera", choices=ASSUMED_LENSES, default="short-side",
                         help="camera of frames without a calibration (CEPDOF/WEPDTOF files): the 180° "
                              "circle that fills the frame's shorter side (default, DESIGN.md), or the "
@@ -282,7 +283,7 @@ def run(args: argparse.Namespace) -> int:
         frames = frames[:args.limit]
     extra: dict[str, Any] = {}
     try:
-        asked = (("max_pixels", args.max_view_pixels), ("second_look_patches", args.second_look))
+        asked = (("max_pixels", args.max_view_pixels), ("second_look_pixels", args.second_look))
         view = dataclasses.replace(DEFAULT_VIEW, **{name: v for name, v in asked if v is not None})
     except ValueError as error:
         print(f"fishloc eval: {error}", file=sys.stderr)

@@ -69,6 +69,8 @@ class ViewReference:
 
 MAX_SECOND_LOOK_PATCHES = 64
 SECOND_LOOK_PATCH_PX = (96, 256)  # a patch's side lies within these (multiples of 32)
+SECOND_LOOK_FULL_PIXELS = 12 * SECOND_LOOK_PATCH_PX[1] ** 2  # the default 12 patches, each at its largest
+MAX_SECOND_LOOK_PIXELS = MAX_SECOND_LOOK_PATCHES * SECOND_LOOK_PATCH_PX[1] ** 2
 
 
 @dataclass(frozen=True)
@@ -129,10 +131,12 @@ class ViewPlanConfig:
     # scale, where a person of 30 x 20 band px (a seated one at the rim) becomes twice that. 12
     # patches at 2x were chosen on the validation renders over 6 and 24, 1.5x and 2.5x, and with
     # the scenes4 and Lunch3 frames beside them (docs/DETECTOR.md, "A second look"). Its patches
-    # take what `max_pixels` leaves beside the view: nothing at the default budget, whose time is
-    # the frame's; 0: none at any budget.
+    # take at most `second_look_pixels` input px in all, a budget of their own beside `max_pixels`:
+    # 0 (the default) none, for the default view's time is the frame's and the look costs 1.3-1.5x
+    # it; `SECOND_LOOK_FULL_PIXELS`, every patch at its largest. 0 patches: none at any budget.
     second_look_patches: int = 12
     second_look_zoom: float = 2.0
+    second_look_pixels: int = 0
 
     def __post_init__(self) -> None:
         if not self.scales or any(not (0.25 <= s <= 4.0) for s in self.scales) or (
@@ -157,6 +161,9 @@ class ViewPlanConfig:
             raise ValueError(f"second_look_patches must lie in [0, {MAX_SECOND_LOOK_PATCHES}] and "
                              f"second_look_zoom in (1, 4], got {self.second_look_patches} and "
                              f"{self.second_look_zoom}")
+        if not 0 <= self.second_look_pixels <= MAX_SECOND_LOOK_PIXELS:
+            raise ValueError(f"second_look_pixels must lie in [0, {MAX_SECOND_LOOK_PIXELS}], got "
+                             f"{self.second_look_pixels}")
         if not 1 <= self.unwrap_samples <= 4:
             raise ValueError(f"unwrap_samples must lie in [1, 4], got {self.unwrap_samples}")
         if self.nadir_strip_from is not None and not 0 < self.nadir_strip_from < self.nadir_view_fraction:
@@ -231,7 +238,7 @@ class ViewPlan:
     # nadir view), before any budget: a budget of at least this plans it whole.
     wanted_pixels: int = 0
     # The second look's patches at most (`ViewPlanConfig.second_look_patches`; 0: none), their
-    # zoom over their band's scale, and the input px they may take in all: what the budget leaves.
+    # zoom over their band's scale, and the input px they may take in all.
     second_look_patches: int = 0
     second_look_zoom: float = 2.0
     second_look_pixels: int = 0
@@ -527,11 +534,10 @@ def plan_view(camera: FisheyeCamera, reference: ViewReference | None = None,
     if ring > edge + 0.5:
         notes.append(f"the frame cuts the image circle ({ring:.0f} px radius, {edge:.0f} px to the nearest "
                      f"edge): the view reaches {top:.0f} px, the frame's corners included")
-    pixels = canvas[0] * canvas[1] + (nadir.side ** 2 if nadir is not None else 0)
-    look_pixels = config.max_pixels - pixels if config.second_look_patches else 0
-    if config.second_look_patches and look_pixels < SECOND_LOOK_PATCH_PX[0] ** 2:
-        notes.append(f"budget {config.max_pixels} px binds: no second look (it leaves {look_pixels} px, a "
-                     f"patch takes {SECOND_LOOK_PATCH_PX[0] ** 2} or more)")
+    look_pixels = config.second_look_pixels if config.second_look_patches else 0
+    if 0 < look_pixels < SECOND_LOOK_PATCH_PX[0] ** 2:
+        notes.append(f"no second look: its {look_pixels} px are fewer than a patch takes "
+                     f"({SECOND_LOOK_PATCH_PX[0] ** 2})")
         look_pixels = 0
     return ViewPlan(grids, offsets, canvas, tuple(bands), smallest, reference.pixels, tuple(notes), nadir,
                     wanted_pixels, config.second_look_patches if look_pixels else 0, config.second_look_zoom,

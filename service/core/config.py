@@ -16,7 +16,7 @@ from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 from contract.model import SpinningPolicy
 from contract.views import DEFAULT_VIEW
 from fisheye.camera import MAX_VIEW_PIXELS, MIN_VIEW_PIXELS
-from fisheye.view_plan import MAX_SECOND_LOOK_PATCHES
+from fisheye.view_plan import MAX_SECOND_LOOK_PIXELS, SECOND_LOOK_FULL_PIXELS
 from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
 from service.core.cpu import cpu_budget
 
@@ -71,9 +71,10 @@ class Settings(BaseSettings):
     max_camera_view_pixels: int = Field(4_000_000, ge=MIN_VIEW_PIXELS, le=MAX_VIEW_PIXELS,
                                         description="the largest budget a camera's record may ask for "
                                                     "(its `max_view_pixels`)")
-    second_look: int = Field(DEFAULT_VIEW.second_look_patches, ge=0, le=MAX_SECOND_LOOK_PATCHES,
-                             description="patches of the second look at a frame's small, uncertain "
-                                         "detections, at most (a planned model only; 0: none)")
+    second_look: int = Field(DEFAULT_VIEW.second_look_pixels, ge=0, le=MAX_SECOND_LOOK_PIXELS,
+                             description="input px the second look at a frame's small, uncertain "
+                                         "detections may take (a planned model only; 0: none; "
+                                         f"{SECOND_LOOK_FULL_PIXELS}: its 12 patches at their largest)")
     threads: int = Field(default_factory=cpu_budget, ge=1,
                          description="inference threads (default: the CPU quota of the container)")
     onnx_spinning: SpinningPolicy = Field(

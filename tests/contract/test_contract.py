@@ -191,9 +191,7 @@ def test_a_camera_record_plans_its_own_view_within_the_limit(tmp_path: Path) -> 
     # runner and the service's pipeline alike); over the limit, the record is planned at the limit.
     path = save_polar_double(tmp_path / "planned.onnx", foot=True, planned=True)
     model = OnnxModel(path, SessionThreads(1))
-    # the double's strip is 64 rows; the second look, which would take what the budget leaves, is
-    # not what this checks
-    view = dataclasses.replace(DEFAULT_VIEW, max_pixels=40_000, second_look_patches=0)
+    view = dataclasses.replace(DEFAULT_VIEW, max_pixels=40_000)  # the double's strip is 64 rows
     pipeline = Pipeline(model, PipelineConfig(view=view, max_camera_view_pixels=90_000))
     server, own = camera_from_dict(CAMERA), camera_from_dict({**CAMERA, "max_view_pixels": 80_000})
     server_plan, own_plan = pipeline.plan(server), pipeline.plan(own)
@@ -300,8 +298,7 @@ def test_a_view_runs_at_its_own_operating_point(tmp_path: Path, points: str, fou
     metadata = {**METADATA, "fishloc.view_operating_points": points}
     path = save_polar_double(tmp_path / "planned.onnx", planned=True, metadata=metadata)
     model = OnnxModel(path, SessionThreads(1))
-    # one band and the nadir view (the double's leave most of the budget: no second look asked)
-    view = dataclasses.replace(DEFAULT_VIEW, scales=(1.0,), second_look_patches=0)
+    view = dataclasses.replace(DEFAULT_VIEW, scales=(1.0,))  # one band and the nadir view
     pipeline = Pipeline(model, PipelineConfig(view=view))
     camera = camera_from_dict(CAMERA)
     plan = pipeline.plan(camera)

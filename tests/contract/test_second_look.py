@@ -23,12 +23,13 @@ from contract import second_look as look
 from contract.detect import second_look
 from contract.views import DEFAULT_VIEW, PlannedInput, view_plan
 from fisheye import camera_from_dict
-from fisheye.view_plan import SECOND_LOOK_PATCH_PX, ViewPlanConfig
+from fisheye.view_plan import SECOND_LOOK_FULL_PIXELS, SECOND_LOOK_PATCH_PX, ViewPlanConfig
 from service.pipeline import Pipeline, PipelineConfig
 
 CAMERA = {"id": "cam", "altitude_m": 3.0, "image_size": [1024, 1024], "principal_point": [511.5, 511.5],
           "focal_px": [320.0, 320.0], "kb": [1.0]}
-ONE_BAND = dataclasses.replace(DEFAULT_VIEW, scales=(1.0,), nadir_fraction=None)
+LOOKING = dataclasses.replace(DEFAULT_VIEW, second_look_pixels=SECOND_LOOK_FULL_PIXELS)
+ONE_BAND = dataclasses.replace(LOOKING, scales=(1.0,), nadir_fraction=None)
 
 
 def _info(tmp_path: Path, **kwargs: object) -> ModelInfo:
@@ -101,49 +102,39 @@ def test_a_patch_adds_whole_central_short_boxes_that_are_no_part_of_a_larger_one
 
 
 def test_the_view_names_and_reports_its_second_look(tmp_path: Path) -> None:
-    # the double's strip (288 x 64) leaves most of the default budget to the second look
     info = _info(tmp_path)
     camera = camera_from_dict(CAMERA)
-    plan = view_plan(info, camera, DEFAULT_VIEW)
-    assert plan.layout.endswith("+look") and plan.second_look_patches == DEFAULT_VIEW.second_look_patches
-    public = plan.public()["second_look"]
-    assert public == {"max_patches": 12, "zoom": 2.0, "patch_px": list(SECOND_LOOK_PATCH_PX),
-                      "max_pixels": DEFAULT_VIEW.max_pixels - plan.pixels}
-    without = view_plan(info, camera, dataclasses.replace(DEFAULT_VIEW, second_look_patches=0))
-    assert without.public()["second_look"] is None and not without.layout.endswith("+look")
+    plan = view_plan(info, camera, LOOKING)
+    assert plan.layout.endswith("+look") and plan.second_look_patches == LOOKING.second_look_patches
+    assert plan.public()["second_look"] == {"max_patches": 12, "zoom": 2.0,
+                                            "patch_px": list(SECOND_LOOK_PATCH_PX),
+                                            "max_pixels": SECOND_LOOK_FULL_PIXELS}
+    for off in (DEFAULT_VIEW, dataclasses.replace(LOOKING, second_look_patches=0)):  # by default: none
+        without = view_plan(info, camera, off)
+        assert without.public()["second_look"] is None and not without.layout.endswith("+look")
+    few = view_plan(info, camera, dataclasses.replace(LOOKING, second_look_pixels=5000))
+    assert few.second_look_patches == 0 and any("no second look" in note for note in few.notes)
 
 
-def test_the_second_look_takes_what_the_budget_leaves() -> None:
-    # The shipped model's view of the demo camera fills the default budget: no second look there,
-    # and the plan says why; a larger budget leaves its patches the difference.
-    from fisheye import load_camera
-    from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
-
-    info = OnnxModel(DEFAULT_MODEL_PATH, SessionThreads(1)).info
-    camera = load_camera(DEMO_CAMERA_PATH)
-    default = view_plan(info, camera, DEFAULT_VIEW)
-    assert default.layout == "1band+nadir" and default.second_look_patches == 0
-    assert any("no second look" in note for note in default.notes)
-    larger = view_plan(info, camera, dataclasses.replace(DEFAULT_VIEW, max_pixels=1_200_000))
-    assert larger.layout == "1band+nadir+look" and larger.pixels == default.pixels
-    assert larger.second_look_pixels == 1_200_000 - larger.pixels
-    # patches beyond what is left are left out, a smaller one after them may still fit
+def test_the_second_look_keeps_within_its_pixels(tmp_path: Path) -> None:
+    camera = camera_from_dict(CAMERA)
+    plan = view_plan(_info(tmp_path), camera, ONE_BAND)
     pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
-    band = look.band_grids(larger)[0]
+    band = look.band_grids(plan)[0]
     along = 30.0 / band.px_per_radius_px  # 30 band rows
-    boxes = np.concatenate([_box(np.asarray(pp), 600.0, k * 0.4, along, 40.0) for k in range(12)])
-    every = look.plan_patches(dataclasses.replace(larger, second_look_pixels=10**9), boxes,
-                              np.full(12, 0.4), pp)
+    boxes = np.concatenate([_box(np.asarray(pp), 400.0, k * 0.5, along, 40.0) for k in range(12)])
+    every = look.plan_patches(plan, boxes, np.full(12, 0.4), pp)
     sizes = [p.grid.strip_wh[0] * p.grid.strip_wh[1] for p in every]
     budget = sum(sizes[:3])
-    some = look.plan_patches(dataclasses.replace(larger, second_look_pixels=budget), boxes,
+    some = look.plan_patches(dataclasses.replace(plan, second_look_pixels=budget), boxes,
                              np.full(12, 0.4), pp)
-    assert len(every) == 12 and 3 <= len(some) < 12
+    assert len(every) == 12 and 3 <= len(some) < 12  # the patches past it left out, smaller ones after kept
     assert sum(p.grid.strip_wh[0] * p.grid.strip_wh[1] for p in some) <= budget
 
 
 @pytest.mark.parametrize("change", [{"second_look_patches": -1}, {"second_look_patches": 65},
-                                    {"second_look_zoom": 1.0}, {"second_look_zoom": 4.5}])
+                                    {"second_look_zoom": 1.0}, {"second_look_zoom": 4.5},
+                                    {"second_look_pixels": -1}, {"second_look_pixels": 64 * 256 * 256 + 1}])
 def test_a_bad_second_look_is_refused(change: dict[str, float]) -> None:
     with pytest.raises(ValueError, match="second_look"):
         ViewPlanConfig(**change)  # type: ignore[arg-type]
@@ -181,7 +172,7 @@ def test_the_pipeline_adds_what_the_patch_finds_at_its_zoom(tmp_path: Path) -> N
     camera = camera_from_dict(CAMERA)
     data, uv = _disc_frame(camera, (2.0, 1.5))
     looking = Pipeline(model, PipelineConfig(view=ONE_BAND)).detect(data, camera, min_score=0.3).detections
-    plain = Pipeline(model, PipelineConfig(view=dataclasses.replace(ONE_BAND, second_look_patches=0))).detect(
+    plain = Pipeline(model, PipelineConfig(view=dataclasses.replace(ONE_BAND, second_look_pixels=0))).detect(
         data, camera, min_score=0.3).detections
     assert len(plain.scores) == 1 and len(looking.scores) == 2
     first = plain.cxcywh[0]

@@ -111,5 +111,5 @@ def test_eval_refuses_a_second_look_out_of_range(tmp_path: Path, capsys: pytest.
     data = _cepdof_file(tmp_path)
     out = tmp_path / "metrics.json"
     assert main(["eval", "--model", str(DEFAULT_MODEL_PATH), "--data", str(data), "--json", str(out),
-                 "--second-look", "99"]) == 2
-    assert "second_look_patches must lie in [0, 64]" in capsys.readouterr().err and not out.exists()
+                 "--second-look", "-1"]) == 2
+    assert "second_look_pixels must lie in [0, 4194304]" in capsys.readouterr().err and not out.exists()

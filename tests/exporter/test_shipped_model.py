@@ -38,7 +38,7 @@ def test_release_checkpoint_matches_the_shipped_onnx() -> None:
     shipped = OnnxModel(DEFAULT_MODEL_PATH, SessionThreads(1))
     checkpoint = load_checkpoint(RELEASE)
     assert dataclasses.replace(shipped.info, sha256="") == contract_info(checkpoint)
-    assert shipped.info.view == "polar" and shipped.info.version == "0.7.3" and shipped.has_foot
+    assert shipped.info.view == "polar" and shipped.info.version == "0.8.0" and shipped.has_foot
     assert shipped.info.planned  # any height and width: the service plans each camera's view
     assert (shipped.info.default_min_score, shipped.info.nms_iou) == (0.236, 0.35)
     assert "Apache-2.0" in shipped.info.licence

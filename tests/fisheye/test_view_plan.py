@@ -111,8 +111,7 @@ def test_a_budget_that_binds_shrinks_the_view_and_says_so() -> None:
     assert plan.wanted_pixels == whole.wanted_pixels == whole.pixels > 1_900_000
     assert plan_view(DEMO, config=ViewPlanConfig(max_pixels=whole.wanted_pixels)).pixels == whole.pixels
     short = plan_view(DEMO, config=ViewPlanConfig(max_pixels=whole.wanted_pixels - 1))
-    # the nadir view goes first (the second look takes the px it leaves)
-    assert short.layout == "2band+look" and any("no nadir view" in note for note in short.notes)
+    assert short.layout == "2band" and any("no nadir view" in note for note in short.notes)  # it goes first
     assert plan.public()["wanted_pixels"] == whole.wanted_pixels
 
 
@@ -121,7 +120,7 @@ def test_narrowing_keeps_the_rim_band_at_its_scale_within_a_budget() -> None:
     budget = 1_400_000
     narrowing = ViewPlanConfig(max_pixels=budget, min_outer_fraction=0.1)
     plan = plan_view(DEMO, config=narrowing)
-    assert plan.layout == "2band+nadir+look" and plan.pixels <= budget
+    assert plan.layout == "2band+nadir" and plan.pixels <= budget
     inner, outer = plan.bands
     assert outer.scale == wide.bands[1].scale == 1.5
     # the outer band starts further out than the unbound plan's, and reports the rim's people
@@ -134,12 +133,12 @@ def test_narrowing_keeps_the_rim_band_at_its_scale_within_a_budget() -> None:
     wider = plan_view(DEMO, config=dataclasses.replace(narrowing, max_pixels=1_600_000))
     assert wider.bands[1].owned_px[0] < outer.owned_px[0]
     default = plan_view(DEMO, config=ViewPlanConfig(max_pixels=budget))
-    assert default.layout == "1band+nadir+look"  # the look takes the px the band leaves
+    assert default.layout == "1band+nadir"
 
 
 def test_a_rim_band_too_thin_to_report_anyone_is_not_kept() -> None:
     plan = plan_view(DEMO, config=ViewPlanConfig(max_pixels=1_200_000, min_outer_fraction=0.1))
-    assert plan.layout == "1band+nadir+look" and plan.bands[0].scale == 1.0
+    assert plan.layout == "1band+nadir" and plan.bands[0].scale == 1.0
     assert any("at scale 1, not 1.5" in note for note in plan.notes)
 
 
@@ -218,7 +217,7 @@ def test_with_the_nadir_view_the_strip_may_leave_it_the_disc() -> None:
     config = ViewPlanConfig(max_pixels=900_000, nadir_strip_from=0.1, nadir_scale=1.5)
     assert plan_view(DEMO, config=dataclasses.replace(config, nadir_strip_from=None)).nadir is None
     plan = plan_view(DEMO, config=config)
-    assert plan.nadir is not None and plan.layout == "1band+nadir+look"  # the strip leaves the look px
+    assert plan.nadir is not None and plan.layout == "1band+nadir"
     (band,) = plan.bands
     assert band.inner_radius_px == pytest.approx(0.1 * circle) and band.rows < 416
     assert plan.canvas_wh == (1792, 384) and plan.pixels == 1792 * 384 + 448 * 448 <= 900_000

@@ -119,19 +119,20 @@ def test_a_planned_model_reports_each_camera_view(settings_for: Callable[..., Se
         model = httpx.get(f"{live.url}/v1/model").json()
         assert view["layout"] == "1band+nadir" and view["operating_point"] == {
             "min_score": model["default_min_score"], "nms_iou": model["nms_iou"]}
-        # the default budget leaves no px for the second look, and the view says so
-        assert view["second_look"] is None and any("no second look" in note for note in view["notes"])
+        assert view["second_look"] is None  # none unless asked for
         assert "view" not in httpx.get(f"{live.url}/v1/cameras").json()["cameras"][0]
         # A record read back is written back as it is: its view is the service's, not part of it.
         record = httpx.get(f"{live.url}/v1/cameras/demo").json()
         assert httpx.put(f"{live.url}/v1/cameras/demo", json=record).status_code == 200
         assert "view" not in httpx.put(f"{live.url}/v1/cameras/demo", json=record).json()
-    with LiveServer(settings_for(model=DEFAULT_MODEL_PATH, max_view_pixels=1_200_000)) as live:
-        # a budget over the view's: the second look takes the rest, at the model's point for it
+    with LiveServer(settings_for(model=DEFAULT_MODEL_PATH, second_look=786_432)) as live:
+        # the second look asked for: the same view, at the point the model carries for it
         view = httpx.get(f"{live.url}/v1/cameras/demo").json()["view"]
         points = httpx.get(f"{live.url}/v1/model").json()["view_operating_points"]
         assert view["layout"] == "1band+nadir+look" and view["operating_point"] == points["1band+nadir+look"]
-        assert view["second_look"]["max_pixels"] == 1_200_000 - view["pixels"]
+        assert view["second_look"] == {"max_patches": 12, "zoom": 2.0, "patch_px": [96, 256],
+                                       "max_pixels": 786_432}
+        assert view["input_wh"] == [1792, 416]
     with LiveServer(settings_for(model=DEFAULT_MODEL_PATH, max_view_pixels=4_000_000)) as live:
         view = httpx.get(f"{live.url}/v1/cameras/demo").json()["view"]
         assert [band["scale"] for band in view["bands"]] == [1.0, 1.5]
@@ -140,7 +141,7 @@ def test_a_planned_model_reports_each_camera_view(settings_for: Callable[..., Se
         assert view["pixels"] == view["input_wh"][0] * view["input_wh"][1] + 384 * 384 <= 4_000_000
         # ... at the operating point the model carries for that view (chosen on renders seen through it)
         points = httpx.get(f"{live.url}/v1/model").json()["view_operating_points"]
-        assert view["layout"] == "2band+nadir+look" and view["operating_point"] == points["2band+nadir"]
+        assert view["layout"] == "2band+nadir" and view["operating_point"] == points["2band+nadir"]
         # the served frame runs both inputs and answers the people of the shipped sample
         sample = (SAMPLES / "000001.jpg").read_bytes()
         answer = httpx.post(f"{live.url}/v1/cameras/demo/detect", content=sample,
@@ -176,8 +177,7 @@ def test_a_camera_record_sets_its_own_view_budget(settings_for: Callable[..., Se
         assert saved.status_code == 200 and saved.json()["max_view_pixels"] == 2_400_000
         view = httpx.get(f"{url}/demo").json()["view"]
         assert view["budget"] == {"max_pixels": 2_400_000, "source": "camera"}
-        assert view["layout"] == "2band+nadir+look"
-        assert [band["scale"] for band in view["bands"]] == [1.0, 1.5]
+        assert view["layout"] == "2band+nadir" and [band["scale"] for band in view["bands"]] == [1.0, 1.5]
         assert view["pixels"] <= 2_400_000
         # ... at the operating point the model carries for that view
         points = httpx.get(f"{live.url}/v1/model").json()["view_operating_points"]
@@ -208,5 +208,4 @@ def test_a_camera_record_sets_its_own_view_budget(settings_for: Callable[..., Se
     with LiveServer(settings_for(model=DEFAULT_MODEL_PATH, max_camera_view_pixels=1_000_000)) as live:
         view = httpx.get(f"{live.url}/v1/cameras/demo").json()["view"]
         assert view["budget"] == {"max_pixels": 1_000_000, "source": "camera"}
-        # (1 000 000 px leave the second look what the strip and nadir view do not take)
-        assert view["layout"] == "1band+nadir+look" and "over this server's limit" in view["notes"][0]
+        assert view["layout"] == "1band+nadir" and "over this server's limit" in view["notes"][0]
