@@ -8,7 +8,7 @@ neighbour's box. The second look takes the frame's small, uncertain detections (
 the `patches` highest-scoring of them, and unwraps a patch about each: the same polar unwrap as the
 detection's band at `zoom` times its rows and columns, three times the box's size each way (within
 `fisheye.view_plan.SECOND_LOOK_PATCH_PX`), sampled from the decoded frame; as many as fit in the
-input px the view's budget leaves (`ViewPlan.second_look_pixels`: none at the default budget).
+look's own budget of input px (`ViewPlan.second_look_pixels`: 0, no look, by default).
 A patch adds the people it finds whole, away from its edges, no longer than a looked-at person may
 be, and not mostly inside a first-look detection that was not looked at again (a part of a larger
 person); they join the first look's detections before the NMS runs again, and one the first look
@@ -99,7 +99,7 @@ def plan_patches(plan: ViewPlan, boxes_cxcywh: FloatArray, scores: FloatArray,
         grid = PolarGrid((float(pp[0]), float(pp[1])), radius_px=inner + height / rows_per_px, height=height,
                          width=width, start_rad=angle - span / 2 * 2 * math.pi / width, inner_radius_px=inner,
                          span=min(span, width))
-        if height * span > left:  # over what the budget leaves: a smaller patch may still fit
+        if height * span > left:  # over what is left of its budget: a smaller patch may still fit
             continue
         left -= height * span
         patches.append(Patch(grid, band, int(index)))
