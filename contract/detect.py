@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, TypeGuard
 
 import cv2
 import numpy as np
@@ -125,6 +125,25 @@ def above(detections: FrameDetections, min_score: float) -> FrameDetections:
                                foot_px=None if detections.foot_px is None else detections.foot_px[keep])
 
 
+def looks_again(mapping: InputMapping) -> TypeGuard[PlannedInput]:
+    """Whether frames seen through `mapping` get the second look (a planned view that has it)."""
+    return isinstance(mapping, PlannedInput) and mapping.plan.second_look_patches > 0
+
+
+def select_looking(model: ContractModel, raw: RawOutputs, mapping: InputMapping, image: NDArray[np.uint8],
+                   scale_xy: tuple[float, float], principal_point: tuple[float, float], min_score: float,
+                   nms_iou: float | None, max_detections: int = 300) -> FrameDetections:
+    """`select_detections` with the second look (`second_look`) of a view that has it: the first
+    look's detections from `look.FIRST_LOOK_FLOOR` (or `min_score`, where lower) looked at again in
+    `image`, the decoded frame at `scale_xy` of the frame's size, then `min_score` applied. The
+    service's pipeline and `ModelRunner` both select so, that what is evaluated is what is served."""
+    if not looks_again(mapping):
+        return select_detections(raw, mapping, principal_point, min_score, nms_iou, max_detections)
+    first = select_detections(raw, mapping, principal_point, min(min_score, look.FIRST_LOOK_FLOOR), nms_iou,
+                              max_detections)
+    return above(second_look(model, image, scale_xy, mapping, first, nms_iou, max_detections), min_score)
+
+
 def second_look(model: ContractModel, image: NDArray[np.uint8], scale_xy: tuple[float, float],
                 mapping: InputMapping, first: FrameDetections, nms_iou: float | None,
                 max_detections: int = 300) -> FrameDetections:
@@ -133,7 +152,7 @@ def second_look(model: ContractModel, image: NDArray[np.uint8], scale_xy: tuple[
     through `model`, unwrapped from `image` (the decoded frame, `scale_xy` of the frame's size), its
     people read back to frame px and kept where `look.patch_keeps` and `look.parts_of` allow; then
     the rotated NMS again. A view without the second look returns `first` as it is."""
-    if not isinstance(mapping, PlannedInput) or not mapping.plan.second_look_patches:
+    if not looks_again(mapping):
         return first
     pp = first.principal_point
     patches = look.plan_patches(mapping.plan, first.boxes_cxcywh, first.scores, pp)
@@ -351,9 +370,8 @@ class ModelRunner:
             images, mapping = view_inputs(info, reduced, camera, view)
             pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
             raw = run_view(self.model, images, mapping)
-            looks = isinstance(mapping, PlannedInput) and mapping.plan.second_look_patches > 0
             scale = (reduced.shape[1] / rgb.shape[1], reduced.shape[0] / rgb.shape[0])
-            found.append(FrameOutputs(raw, mapping, pp, reduced if looks else None, scale))
+            found.append(FrameOutputs(raw, mapping, pp, reduced if looks_again(mapping) else None, scale))
         return found
 
     def select(self, outputs: Sequence[FrameOutputs], min_score: float, nms_iou: float | None = None
@@ -367,10 +385,8 @@ class ModelRunner:
                 detections = select_detections(o.raw, o.mapping, o.principal_point, min_score, iou,
                                                self.max_detections)
             else:
-                first = select_detections(o.raw, o.mapping, o.principal_point,
-                                          min(min_score, look.FIRST_LOOK_FLOOR), iou, self.max_detections)
-                detections = above(second_look(self.model, o.image, o.scale_xy, o.mapping, first, iou,
-                                               self.max_detections), min_score)
+                detections = select_looking(self.model, o.raw, o.mapping, o.image, o.scale_xy,
+                                            o.principal_point, min_score, iou, self.max_detections)
             found.append(dataclasses.replace(detections, view_point=point))
         return found
 

@@ -261,7 +261,8 @@ class ViewPlan:
     @property
     def layout(self) -> str:
         """What the plan runs, as a model names the views it has an operating point for
-        (`contract.metadata.ModelInfo.view_points`): `1band`, `2band`, each `+nadir` with one."""
+        (`contract.metadata.ModelInfo.view_points`): `1band`, `2band`, each `+nadir` with one and
+        `+look` with the second look."""
         return view_layout(len(self.bands), self.nadir is not None, self.second_look_patches > 0)
 
     def public(self) -> dict[str, object]:

@@ -29,9 +29,8 @@ from contract import (
     view_inputs,
 )
 from contract import select_detections as select_raw
-from contract.detect import above, second_look
-from contract.second_look import FIRST_LOOK_FLOOR
-from contract.views import DEFAULT_VIEW, PlannedInput, camera_view, mapping_layout, view_plan, view_reference
+from contract.detect import looks_again, select_looking
+from contract.views import DEFAULT_VIEW, camera_view, mapping_layout, view_plan, view_reference
 from fisheye import FisheyeCamera, cxcywh_to_corners, foot_points, radial_angles_rad
 from fisheye.view_plan import ViewPlan, ViewPlanConfig, ViewPlanError, may_have_nadir, nadir_side
 from service.frame_decode import DecodedFrame, FrameError, check_frame_size, decode_frame, read_header
@@ -154,13 +153,10 @@ class Pipeline:
 
         raw = run_view(self.model, images, mapping)
         threshold = self.point(mapping_layout(mapping)).min_score if min_score is None else float(min_score)
-        if isinstance(mapping, PlannedInput) and mapping.plan.second_look_patches:
+        if looks_again(mapping):
             # the second look's patches run on the model too: their time counts as inference
-            first = self.select(raw, mapping, min(threshold, FIRST_LOOK_FLOOR), frame_camera)
             scale = (frame.rgb.shape[1] / header.size_wh[0], frame.rgb.shape[0] / header.size_wh[1])
-            kept = above(second_look(self.model, frame.rgb, scale, mapping, first,
-                                     self.point(mapping_layout(mapping)).nms_iou, self.config.max_detections),
-                         threshold)
+            kept = self.select(raw, mapping, threshold, frame_camera, frame.rgb, scale)
             inferred = time.perf_counter()
         else:
             inferred = time.perf_counter()
@@ -212,11 +208,16 @@ class Pipeline:
         model's own for it (`ModelInfo.point_for`), with the configured NMS IoU where one is set."""
         return self.info.point_for(layout, self.config.nms_iou)
 
-    def select(self, raw: RawOutputs, mapping: InputMapping, threshold: float,
-               camera: FisheyeCamera) -> FrameDetections:
+    def select(self, raw: RawOutputs, mapping: InputMapping, threshold: float, camera: FisheyeCamera,
+               image: NDArray[np.uint8] | None = None, scale_xy: tuple[float, float] = (1.0, 1.0)
+               ) -> FrameDetections:
         """Model outputs -> the kept detections in frame px: score threshold, finite positive boxes,
         rotated NMS about `camera`'s principal point (at the view's operating point's IoU), at most
-        max_detections."""
+        max_detections; with the decoded frame `image` (at `scale_xy` of the frame's size), the
+        second look of a view that has it (`contract.detect.select_looking`)."""
         pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
         nms_iou = self.point(mapping_layout(mapping)).nms_iou
-        return select_raw(raw, mapping, pp, threshold, nms_iou, self.config.max_detections)
+        if image is None:
+            return select_raw(raw, mapping, pp, threshold, nms_iou, self.config.max_detections)
+        return select_looking(self.model, raw, mapping, image, scale_xy, pp, threshold, nms_iou,
+                              self.config.max_detections)
