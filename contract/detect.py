@@ -162,10 +162,13 @@ def second_look(model: ContractModel, image: NDArray[np.uint8], scale_xy: tuple[
     others = first.boxes_cxcywh[[i for i in range(len(first.scores)) if i not in looked]]
     boxes, scores = [first.boxes_cxcywh], [first.scores]
     feet: list[FloatArray | None] = [first.foot_px]
-    for patch in patches:
-        patch_input = patch.grid.unwrap(image, scale_xy, border_value=model.info.pad_value)
-        found = select_detections(model.run(patch_input), PolarInput(patch.grid), pp, look.FIRST_LOOK_FLOOR,
-                                  nms_iou, max_detections)
+    inputs = [patch.grid.unwrap(image, scale_xy, border_value=model.info.pad_value) for patch in patches]
+    canvas = look.pack([(image.shape[1], image.shape[0]) for image in inputs])
+    raws = canvas.split(model.run(canvas.paste(inputs, model.info.pad_value)))
+    for patch, raw in zip(patches, raws, strict=True):
+        # The strip's own NMS is the patch's: one band's piece has no overlap columns for the
+        # rotated one to merge, and that runs over every look's people below.
+        found = frame_candidates(raw, PolarInput(patch.grid), pp, look.FIRST_LOOK_FLOOR, nms_iou)
         keep = look.patch_keeps(patch, found.boxes_cxcywh)
         keep[keep] = ~look.parts_of(patch.band, found.boxes_cxcywh[keep], others)
         boxes.append(found.boxes_cxcywh[keep])

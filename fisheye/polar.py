@@ -133,13 +133,14 @@ class PolarGrid:
         spread evenly over its square, for `unwrap_with_maps` to average."""
         strip_w, strip_h = self.strip_wh
         offsets = (np.arange(samples, dtype=np.float64) + 0.5) / samples - 0.5
-        columns, rows = np.meshgrid((np.arange(strip_w, dtype=np.float64)[:, None] + offsets).ravel(),
-                                    (np.arange(strip_h, dtype=np.float64)[:, None] + offsets).ravel())
-        uv = self.strip_to_frame(np.stack([columns.ravel(), rows.ravel()], axis=1))
-        map_u = (uv[:, 0] + 0.5) * scale_xy[0] - 0.5
-        map_v = (uv[:, 1] + 0.5) * scale_xy[1] - 0.5
-        shape = (strip_h * samples, strip_w * samples)
-        return map_u.reshape(shape).astype(np.float32), map_v.reshape(shape).astype(np.float32)
+        # A strip px's angle depends on its column alone and its radius on its row alone: the maps
+        # are outer products of the two (the same values `strip_to_frame` gives, per px).
+        angle = self.column_to_angle_rad((np.arange(strip_w, dtype=np.float64)[:, None] + offsets).ravel())
+        radius = self.row_to_radius_px((np.arange(strip_h, dtype=np.float64)[:, None] + offsets).ravel())
+        u0, v0 = self.principal_point
+        map_u = (u0 + radius[:, None] * np.cos(angle)[None, :] + 0.5) * scale_xy[0] - 0.5
+        map_v = (v0 + radius[:, None] * np.sin(angle)[None, :] + 0.5) * scale_xy[1] - 0.5
+        return map_u.astype(np.float32), map_v.astype(np.float32)
 
     def unwrap(self, image: NDArray[np.uint8], scale_xy: tuple[float, float] = (1.0, 1.0),
                border_value: int = 0, samples: int = 1) -> NDArray[np.uint8]:

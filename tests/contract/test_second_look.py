@@ -21,7 +21,7 @@ from contract import (
 )
 from contract import second_look as look
 from contract.detect import second_look
-from contract.views import DEFAULT_VIEW, PlannedInput, view_plan
+from contract.views import DEFAULT_VIEW, PlannedInput, PolarInput, view_plan
 from fisheye import camera_from_dict
 from fisheye.view_plan import SECOND_LOOK_FULL_PIXELS, SECOND_LOOK_PATCH_PX, ViewPlanConfig
 from service.pipeline import Pipeline, PipelineConfig
@@ -223,3 +223,94 @@ def test_a_person_both_looks_found_stands_at_the_first_looks_foot(
         np.testing.assert_allclose(found.foot_px[0], [700.0, 800.0])
     else:  # no one is the same person: the patch's own foot, 30 patch rows below its box
         assert np.hypot(*(found.foot_px[0] - [700.0, 800.0])) > 50
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_patches_pack_apart_on_the_stride_in_no_more_px_than_a_row_or_a_column(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    low, high = SECOND_LOOK_PATCH_PX
+    count = int(rng.integers(1, 13))
+    sizes = [(int(w), int(h)) for w, h in rng.integers(low // 32, high // 32 + 1, (count, 2)) * 32]
+    canvas = look.pack(sizes)
+    width, height = canvas.size_wh
+    assert width % 32 == 0 and height % 32 == 0
+    rects = [(x, y, x + w, y + h) for (x, y), (w, h) in zip(canvas.offsets, sizes, strict=True)]
+    for x1, y1, x2, y2 in rects:
+        assert x1 % 32 == 0 and y1 % 32 == 0 and min(x1, y1) >= 0 and x2 <= width and y2 <= height
+    for a, (ax1, ay1, ax2, ay2) in enumerate(rects):  # a gutter between every two patches
+        for bx1, by1, bx2, by2 in rects[a + 1:]:
+            assert (ax2 + look.GUTTER_PX <= bx1 or bx2 + look.GUTTER_PX <= ax1
+                    or ay2 + look.GUTTER_PX <= by1 or by2 + look.GUTTER_PX <= ay1)
+    gutters = look.GUTTER_PX * (len(sizes) - 1)
+    one_row = (sum(w for w, _ in sizes) + gutters) * max(h for _, h in sizes)
+    one_column = max(w for w, _ in sizes) * (sum(h for _, h in sizes) + gutters)
+    assert width * height <= min(one_row, one_column)
+
+
+def test_a_canvas_holds_each_patch_at_its_offset_and_gives_each_its_own_people() -> None:
+    canvas = look.pack([(96, 128), (160, 96), (96, 96)])
+    images = [np.full((h, w, 3), 50 * (i + 1), dtype=np.uint8) for i, (w, h) in enumerate(canvas.sizes_wh)]
+    pasted = canvas.paste(images, pad_value=7)
+    for (x, y), (w, h), image in zip(canvas.offsets, canvas.sizes_wh, images, strict=True):
+        np.testing.assert_array_equal(pasted[y:y + h, x:x + w], image)
+    assert (pasted == 7).sum() == pasted.size - 3 * sum(w * h for w, h in canvas.sizes_wh)
+    # one person in each patch, given at (10, 20)-(30, 60) of it, and one in a gutter
+    local = np.array([10.0, 20.0, 30.0, 60.0], dtype=np.float32)
+    boxes = [local + np.tile(np.array(offset, dtype=np.float32), 2) for offset in canvas.offsets]
+    (x, y), (w, _) = canvas.offsets[0], canvas.sizes_wh[0]
+    boxes.append(np.array([x + w + 4, y, x + w + 28, y + 40], dtype=np.float32))
+    raw = RawOutputs(np.stack(boxes), np.array([0.9, 0.8, 0.7, 0.6], dtype=np.float32),
+                     np.stack(boxes)[:, 2:].copy())
+    pieces = canvas.split(raw)
+    assert [len(piece.scores) for piece in pieces] == [1, 1, 1]
+    for piece, score in zip(pieces, [0.9, 0.8, 0.7], strict=True):
+        np.testing.assert_allclose(piece.boxes[0], local)
+        np.testing.assert_allclose(piece.foot[0], local[2:])
+        assert piece.scores[0] == pytest.approx(score)
+
+
+class _BlobModel:
+    """A stand-in for the network: a BOX_WH box on every bright blob of its input, score 0.6."""
+
+    def __init__(self, info: ModelInfo) -> None:
+        self.info, self.runs = info, 0
+
+    def run(self, image: np.ndarray) -> RawOutputs:
+        import cv2
+
+        self.runs += 1
+        count, _, _, centroids = cv2.connectedComponentsWithStats((image.sum(axis=2) > 600).astype(np.uint8))
+        centres = centroids[1:count].astype(np.float32)
+        half = np.array(BOX_WH, dtype=np.float32) / 2
+        boxes = np.concatenate([centres - half, centres + half], axis=1).reshape(-1, 4)
+        return RawOutputs(boxes, np.full(len(boxes), 0.6, dtype=np.float32), None)
+
+    def run_boxes(self, image: np.ndarray) -> RawOutputs:
+        return self.run(image)
+
+
+def test_the_patches_run_at_once_find_what_each_finds_alone(tmp_path: Path) -> None:
+    import cv2
+
+    info = _info(tmp_path)
+    camera = camera_from_dict(CAMERA)
+    plan = view_plan(info, camera, ONE_BAND)
+    pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
+    image = np.full((1024, 1024, 3), 30, dtype=np.uint8)
+    spots = [(300.0, 0.7), (320.0, 2.5), (280.0, -1.9)]
+    first_boxes = np.concatenate([_box(np.asarray(pp), r, a, 30.0, 14.0) for r, a in spots])
+    for cx, cy, *_ in first_boxes:
+        cv2.circle(image, (round(cx), round(cy)), 5, (255, 255, 255), -1)
+    first = FrameDetections(first_boxes, np.array([0.5, 0.45, 0.4]), pp)
+    model = _BlobModel(info)
+    found = second_look(model, image, (1.0, 1.0), PlannedInput(plan), first, 0.35)
+    assert model.runs == 1  # one canvas
+    alone = []
+    for patch in look.plan_patches(plan, first_boxes, first.scores, pp):
+        raw = model.run(patch.grid.unwrap(image, border_value=info.pad_value))
+        alone.append(PolarInput(patch.grid).boxes_to_frame(raw.boxes.astype(np.float64)))
+    assert len(alone) == 3 and all(len(boxes) == 1 for boxes in alone)
+    added = found.boxes_cxcywh[np.isclose(found.scores, 0.6)]
+    assert len(added) == 3
+    for boxes in alone:  # each patch's person, read back to the frame where it alone puts them
+        assert np.abs(added - boxes[0]).max(axis=1).min() < 1e-3
