@@ -158,12 +158,12 @@ def second_look(model: ContractModel, image: NDArray[np.uint8], scale_xy: tuple[
     patches = look.plan_patches(mapping.plan, first.boxes_cxcywh, first.scores, pp)
     if not patches:
         return first
+    patches, canvas = look.fit(patches, mapping.plan.second_look_pixels)
     looked = {patch.detection for patch in patches}
     others = first.boxes_cxcywh[[i for i in range(len(first.scores)) if i not in looked]]
     boxes, scores = [first.boxes_cxcywh], [first.scores]
     feet: list[FloatArray | None] = [first.foot_px]
     inputs = [patch.grid.unwrap(image, scale_xy, border_value=model.info.pad_value) for patch in patches]
-    canvas = look.pack([(image.shape[1], image.shape[0]) for image in inputs])
     raws = canvas.split(model.run(canvas.paste(inputs, model.info.pad_value)))
     for patch, raw in zip(patches, raws, strict=True):
         # The strip's own NMS is the patch's: one band's piece has no overlap columns for the

@@ -177,12 +177,21 @@ class Canvas:
 
 
 def pack(sizes_wh: Sequence[tuple[int, int]]) -> Canvas:
-    """The smallest canvas (in px) of shelves that holds patches of `sizes_wh` (multiples of 32),
-    `GUTTER_PX` apart: tallest first, left to right, a new shelf below where the next would pass
-    the canvas's width; every width from the widest patch to one shelf of all is tried. One run of
-    it costs what the patches' px do, where a run each paid ~2.5 ms of overhead per patch."""
+    """The smallest canvas (in px) that holds patches of `sizes_wh` (multiples of 32) `GUTTER_PX`
+    apart, packed in shelves (tallest first, left to right, a new shelf below where the next would
+    pass the canvas's width) or in columns (the same, turned), each width (height) from the widest
+    patch to one shelf of all tried. One run of it costs about what its px do, where a run per
+    patch paid ~2.5 ms of overhead each time."""
     if not sizes_wh:
         raise ValueError("no patches to pack")
+    shelves = _shelves(sizes_wh)
+    turned = _shelves([(h, w) for w, h in sizes_wh])
+    columns = Canvas((turned.size_wh[1], turned.size_wh[0]), tuple((y, x) for x, y in turned.offsets),
+                     tuple(sizes_wh))
+    return min((shelves, columns), key=lambda canvas: canvas.size_wh[0] * canvas.size_wh[1])
+
+
+def _shelves(sizes_wh: Sequence[tuple[int, int]]) -> Canvas:
     order = sorted(range(len(sizes_wh)), key=lambda i: (-sizes_wh[i][1], -sizes_wh[i][0]))
     limits, row = {max(w for w, _ in sizes_wh)}, -GUTTER_PX
     for i in order:
@@ -203,3 +212,15 @@ def pack(sizes_wh: Sequence[tuple[int, int]]) -> Canvas:
             best = canvas
     assert best is not None
     return best
+
+
+def fit(patches: Sequence[Patch], max_pixels: int) -> tuple[list[Patch], Canvas]:
+    """The patches (best first) whose canvas (`pack`) takes at most `max_pixels` px, gutters
+    included, and that canvas: the last patch left out while it takes more. The first patch alone
+    always fits (`plan_patches` gave it no more px than the budget)."""
+    kept = list(patches)
+    canvas = pack([patch.grid.strip_wh for patch in kept])
+    while len(kept) > 1 and canvas.size_wh[0] * canvas.size_wh[1] > max_pixels:
+        kept.pop()
+        canvas = pack([patch.grid.strip_wh for patch in kept])
+    return kept, canvas

@@ -130,10 +130,12 @@ class ViewPlanConfig:
     # detections seen again, each in a patch of its band at `second_look_zoom` times the band's
     # scale, where a person of 30 x 20 band px (a seated one at the rim) becomes twice that. 12
     # patches at 2x were chosen on the validation renders over 6 and 24, 1.5x and 2.5x, and with
-    # the scenes4 and Lunch3 frames beside them (docs/DETECTOR.md, "A second look"). Its patches
-    # take at most `second_look_pixels` input px in all, a budget of their own beside `max_pixels`:
-    # 0 (the default) none, for the default view's time is the frame's and the look costs 1.3-1.5x
-    # it; `SECOND_LOOK_FULL_PIXELS`, every patch at its largest. 0 patches: none at any budget.
+    # the scenes4 and Lunch3 frames beside them (docs/DETECTOR.md, "A second look"). Its patches,
+    # packed into one input (`contract.second_look.pack`), take at most `second_look_pixels` input px
+    # with their gutters, a budget of their own beside `max_pixels`: 0 (the default) none, for the
+    # default view's time is the frame's and the look costs 1.17-1.30x 0.5.0's;
+    # `SECOND_LOOK_FULL_PIXELS`, 12 patches' px at their largest (the canvas of 12 such takes more:
+    # its last patches are left out). 0 patches: none at any budget.
     second_look_patches: int = 12
     second_look_zoom: float = 2.0
     second_look_pixels: int = 0

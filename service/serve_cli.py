@@ -60,9 +60,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "camera's record sets its own (max_view_pixels)")
     parser.add_argument("--second-look", type=int, metavar="PIXELS",
                         help="the second look: a frame's small, uncertain detections seen again at twice "
-                             "their band's scale, in patches of this many input px in all (a planned "
-                             "model only; env FISHLOC_SECOND_LOOK; default 0: none; 786432: its 12 "
-                             "patches at their largest; 1.3-1.5x the time of a frame)")
+                             "their band's scale, in one input of its patches of at most this many px (a "
+                             "planned model only; env FISHLOC_SECOND_LOOK; default 0: none; 786432: "
+                             "12 patches' px at their largest; 1.17-1.30x 0.5.0's time a frame)")
     parser.add_argument("--max-camera-view-pixels", type=int, metavar="PIXELS",
                         help="the largest budget a camera's record may set for its view (env "
                              "FISHLOC_MAX_CAMERA_VIEW_PIXELS; default 4000000)")

@@ -73,8 +73,9 @@ class Settings(BaseSettings):
                                                     "(its `max_view_pixels`)")
     second_look: int = Field(DEFAULT_VIEW.second_look_pixels, ge=0, le=MAX_SECOND_LOOK_PIXELS,
                              description="input px the second look at a frame's small, uncertain "
-                                         "detections may take (a planned model only; 0: none; "
-                                         f"{SECOND_LOOK_FULL_PIXELS}: its 12 patches at their largest)")
+                                         "detections may take, its patches packed into one input "
+                                         "(a planned model only; 0: none; "
+                                         f"{SECOND_LOOK_FULL_PIXELS}: 12 patches' px at their largest)")
     threads: int = Field(default_factory=cpu_budget, ge=1,
                          description="inference threads (default: the CPU quota of the container)")
     onnx_spinning: SpinningPolicy = Field(

@@ -130,6 +130,13 @@ def test_the_second_look_keeps_within_its_pixels(tmp_path: Path) -> None:
                              np.full(12, 0.4), pp)
     assert len(every) == 12 and 3 <= len(some) < 12  # the patches past it left out, smaller ones after kept
     assert sum(p.grid.strip_wh[0] * p.grid.strip_wh[1] for p in some) <= budget
+    # their canvas, gutters included, within it too: the last patches left out until it fits
+    fitted, canvas = look.fit(some, budget)
+    assert fitted == some[:len(fitted)] and 1 <= len(fitted) < len(some)
+    assert canvas.size_wh[0] * canvas.size_wh[1] <= budget
+    grown = look.pack([p.grid.strip_wh for p in some[:len(fitted) + 1]])
+    assert grown.size_wh[0] * grown.size_wh[1] > budget
+    assert look.fit(some[:1], 1)[0] == some[:1]  # one patch is always run
 
 
 @pytest.mark.parametrize("change", [{"second_look_patches": -1}, {"second_look_patches": 65},
