@@ -192,6 +192,7 @@ def pack(sizes_wh: Sequence[tuple[int, int]]) -> Canvas:
 
 
 def _shelves(sizes_wh: Sequence[tuple[int, int]]) -> Canvas:
+    """`pack`'s shelves alone: the smallest canvas of those the widths tried give."""
     order = sorted(range(len(sizes_wh)), key=lambda i: (-sizes_wh[i][1], -sizes_wh[i][0]))
     limits, row = {max(w for w, _ in sizes_wh)}, -GUTTER_PX
     for i in order:

@@ -133,9 +133,9 @@ class ViewPlanConfig:
     # the scenes4 and Lunch3 frames beside them (docs/DETECTOR.md, "A second look"). Its patches,
     # packed into one input (`contract.second_look.pack`), take at most `second_look_pixels` input px
     # with their gutters, a budget of their own beside `max_pixels`: 0 (the default) none, for the
-    # default view's time is the frame's and the look costs 1.17-1.30x 0.5.0's;
-    # `SECOND_LOOK_FULL_PIXELS`, 12 patches' px at their largest (the canvas of 12 such takes more:
-    # its last patches are left out). 0 patches: none at any budget.
+    # default view's time is the frame's and the look costs 1.2-1.8x it (the benchmark's renders to
+    # crowded real frames); `SECOND_LOOK_FULL_PIXELS`, 12 patches' px at their largest (the canvas
+    # of 12 such takes more: its last patches are left out). 0 patches: none at any budget.
     second_look_patches: int = 12
     second_look_zoom: float = 2.0
     second_look_pixels: int = 0

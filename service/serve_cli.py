@@ -62,7 +62,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the second look: a frame's small, uncertain detections seen again at twice "
                              "their band's scale, in one input of its patches of at most this many px (a "
                              "planned model only; env FISHLOC_SECOND_LOOK; default 0: none; 786432: "
-                             "12 patches' px at their largest; 1.17-1.30x 0.5.0's time a frame)")
+                             "12 patches' px at their largest; 1.2-1.8x the time of a frame without it)")
     parser.add_argument("--max-camera-view-pixels", type=int, metavar="PIXELS",
                         help="the largest budget a camera's record may set for its view (env "
                              "FISHLOC_MAX_CAMERA_VIEW_PIXELS; default 4000000)")
