@@ -9,7 +9,9 @@
 Each model (a FishLoc ONNX file or training checkpoint) or zero-shot baseline (`rotations:ONNX`,
 `letterbox:ONNX`, `tiled:ONNX`: any COCO file of `../shared/pretrained/`, `detector.baselines`)
 is evaluated on every data set exactly as `fishloc eval` does, then timed on the frames of
-`--frames` (encoded JPEGs of one size, as a camera sends them): *inference* is the model alone on
+`--frames` (encoded JPEGs of one size, as a camera sends them), or on those of an evaluation set,
+each with its own camera (`--time-on ANNOTATIONS`: real frames of several scenes and lenses, as the
+service would be sent them): *inference* is the model alone on
 its own input (p50), *end to end* the whole path from the JPEG bytes to floor positions
 (`service.pipeline.Pipeline.detect` for ONNX models, decode + predictor for the baselines, decode +
 view + windows + selection for `tiled:`; p50 and p95), interleaved model by model so that the
@@ -49,7 +51,7 @@ from contract.model import SpinningPolicy
 from contract.views import DEFAULT_VIEW
 from detector.baselines import LetterboxPredictor, RotatedCropsPredictor, TiledCocoModel
 from detector.data.readers import read_dataset
-from detector.evaluate import Predictor, RunnerPredictor, evaluate, json_safe, load_predictor
+from detector.evaluate import Predictor, RunnerPredictor, evaluate, frame_camera, json_safe, load_predictor
 from fisheye import FisheyeCamera, load_camera
 from fisheye.view_plan import ViewPlanConfig
 from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
@@ -193,13 +195,25 @@ def build_entry(name: str, spec: str, threads: int) -> Entry:
     return _predictor_entry(name, load_predictor(spec, threads=threads))
 
 
-def measure_times(entries: list[Entry], frames: FrameSet, camera: FisheyeCamera, runs: int,
+def timing_frames(frames: FrameSet, camera: FisheyeCamera) -> list[tuple[bytes, FisheyeCamera]]:
+    """`--frames`: each encoded frame with the one camera they were all taken with."""
+    return [(data, camera) for data in frames.data]
+
+
+def set_frames(path: str) -> list[tuple[bytes, FisheyeCamera]]:
+    """`--time-on`: the frames of an evaluation set, each with its own camera (the set's, or the
+    one `fishloc eval` assumes for a frame without), as the service would be sent them."""
+    return [(frame.path.read_bytes(), frame_camera(frame)) for frame in read_dataset(path)]
+
+
+def measure_times(entries: list[Entry], frames: list[tuple[bytes, FisheyeCamera]], runs: int,
                   warmup: int) -> dict[str, dict[str, Any]]:
-    """Each entry's inference p50 and end-to-end p50/p95 (ms) over `runs` frames, interleaved."""
+    """Each entry's inference p50 and end-to-end p50/p95 (ms) over `runs` frames (each with its
+    camera, in turn), the entries interleaved frame by frame."""
     frame_times: dict[str, list[float]] = {e.name: [] for e in entries}
     inference_times: dict[str, list[float]] = {e.name: [] for e in entries}
     for index in range(warmup + runs):
-        data = frames.data[index % len(frames.data)]
+        data, camera = frames[index % len(frames)]
         for entry in entries:
             elapsed = entry.frame_ms(data, camera)
             alone = entry.inference_ms(data, camera) if entry.inference_ms is not None else None
@@ -256,7 +270,11 @@ def main(argv: list[str] | None = None) -> int:
                              "on the default model's planned views")
     parser.add_argument("--data", action="append", default=[], metavar="NAME=ANNOTATIONS",
                         help="an evaluation set; names starting with 'real' get the real-frame columns")
-    parser.add_argument("--frames", default=None, help="folder of encoded frames of one size to time")
+    timing = parser.add_mutually_exclusive_group()
+    timing.add_argument("--frames", default=None, help="folder of encoded frames of one size to time")
+    timing.add_argument("--time-on", default=None, metavar="ANNOTATIONS",
+                        help="time on the frames of this evaluation set instead, each with its own "
+                             "camera (e.g. real frames of several scenes and lenses)")
     parser.add_argument("--camera", default=str(DEMO_CAMERA_PATH), help="camera of --frames (scaled)")
     parser.add_argument("--runs", type=int, default=30)
     parser.add_argument("--warmup", type=int, default=3)
@@ -274,10 +292,11 @@ def main(argv: list[str] | None = None) -> int:
         for entry in entries:
             print(f"[compare] {entry.name} on {data_name}", file=sys.stderr)
             rows[entry.name]["metrics"][data_name] = evaluate(entry.predictor, frames).metrics
-    if args.frames:
-        print(f"[compare] timing on {args.frames}", file=sys.stderr)
-        times = measure_times(entries, load_frames(args.frames), load_camera(args.camera), args.runs,
-                              args.warmup)
+    if args.frames or args.time_on:
+        print(f"[compare] timing on {args.frames or args.time_on}", file=sys.stderr)
+        timed = (timing_frames(load_frames(args.frames), load_camera(args.camera)) if args.frames
+                 else set_frames(args.time_on))
+        times = measure_times(entries, timed, args.runs, args.warmup)
         for name, figures in times.items():
             rows[name]["times"] = figures
     table = markdown(rows, [name for name, _ in datasets])

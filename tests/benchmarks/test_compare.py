@@ -75,3 +75,43 @@ def test_a_coco_file_read_in_windows_is_evaluated_and_timed_in_the_planned_view(
         assert all(rows[name]["times"][k] > 0 for k in ("inference_p50_ms", "e2e_p50_ms"))
     assert rows["tiled"]["metrics"]["samples"]["min_score"] == 0.3  # the spec's point, else 0.3
     assert rows["tiled 4M"]["metrics"]["samples"]["min_score"] == 0.4
+
+
+def _two_lenses(tmp_path: Path) -> Path:
+    """The samples' first frame, and the same frame at half size with its camera scaled: one set of
+    two frames, each of its own size and camera."""
+    import cv2
+
+    from fisheye import camera_from_dict, camera_to_dict
+
+    record = json.loads((ROOT / "samples" / "annotations.json").read_text())
+    first = record["images"][0]
+    image = cv2.imread(str(ROOT / "samples" / first["file_name"]))
+    small = cv2.resize(image, (image.shape[1] // 2, image.shape[0] // 2), interpolation=cv2.INTER_AREA)
+    cv2.imwrite(str(tmp_path / "large.jpg"), image)
+    cv2.imwrite(str(tmp_path / "small.jpg"), small)
+    camera = camera_from_dict(first["camera"])
+    half = camera_to_dict(camera.scaled_to((small.shape[1], small.shape[0])))
+    images = [dict(first, id=1, file_name="large.jpg"),
+              dict(first, id=2, file_name="small.jpg", width=small.shape[1], height=small.shape[0],
+                   camera=half)]
+    path = tmp_path / "annotations.json"
+    path.write_text(json.dumps({**record, "images": images, "annotations": []}))
+    return path
+
+
+def test_the_frames_of_a_set_are_timed_each_with_its_own_camera(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from benchmarks.compare import set_frames
+
+    path = _two_lenses(tmp_path)
+    frames = set_frames(str(path))
+    assert [camera.image_size for _, camera in frames] == [(2048, 2048), (1024, 1024)]
+    out = tmp_path / "compare.json"
+    assert main(["--model", f"shipped={ROOT / 'models' / 'fishloc-default.onnx'}", "--time-on", str(path),
+                 "--runs", "2", "--warmup", "0", "--json", str(out)]) == 0
+    times = json.loads(out.read_text())["rows"]["shipped"]["times"]
+    assert all(times[k] > 0 for k in ("inference_p50_ms", "e2e_p50_ms", "e2e_p95_ms"))  # measured, not judged
+    with pytest.raises(SystemExit):  # one way to time, not both
+        main(["--model", f"shipped={ROOT / 'models' / 'fishloc-default.onnx'}", "--time-on", str(path),
+              "--frames", str(ROOT / "samples")])
