@@ -191,11 +191,12 @@ def view_reference(info: ModelInfo) -> ViewReference:
 
 def camera_view(config: ViewPlanConfig, camera: FisheyeCamera, limit: int | None = None) -> ViewPlanConfig:
     """How `camera`'s view is planned: `config` with the camera's own budget (its record's
-    `max_view_pixels`) in place of `config`'s, at most `limit` where one is given."""
-    own = camera.max_view_pixels
-    if own is None:
-        return config
-    return dataclasses.replace(config, max_pixels=own if limit is None else min(own, limit))
+    `max_view_pixels`) in place of `config`'s, at most `limit` where one is given, and its own
+    second look (`second_look_pixels`) in place of `config`'s where its record sets one."""
+    own, look = camera.max_view_pixels, camera.second_look_pixels
+    if own is not None:
+        config = dataclasses.replace(config, max_pixels=own if limit is None else min(own, limit))
+    return config if look is None else dataclasses.replace(config, second_look_pixels=look)
 
 
 @functools.lru_cache(maxsize=256)

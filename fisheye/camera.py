@@ -34,6 +34,9 @@ _MAX_KB_ABS = 1000.0
 # The range of a view budget (model-input px): a camera's own, the server's (`service.core.config`).
 MIN_VIEW_PIXELS = 64 * 64
 MAX_VIEW_PIXELS = 64_000_000
+# The most input px a second look may take (`fisheye.view_plan.ViewPlanConfig.second_look_pixels`):
+# 64 patches of 256 x 256.
+MAX_SECOND_LOOK_PIXELS = 64 * 256 * 256
 
 
 @dataclass(frozen=True)
@@ -78,6 +81,11 @@ class FisheyeCamera(BaseModel):
         default=None, ge=MIN_VIEW_PIXELS, le=MAX_VIEW_PIXELS,
         description="This camera's own budget for a planned view (model-input px, width × height), in "
                     "place of the server's --max-view-pixels and at most its --max-camera-view-pixels.")
+    second_look_pixels: int | None = Field(
+        default=None, ge=0, le=MAX_SECOND_LOOK_PIXELS,
+        description="This camera's own budget for the second look at its frames' small, uncertain "
+                    "detections (input px of its one run), in place of the server's --second-look: "
+                    "786432 for a crowded scene, 0 for none.")
 
     @field_validator("id")
     @classmethod

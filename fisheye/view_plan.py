@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from fisheye.camera import FisheyeCamera
+from fisheye.camera import MAX_SECOND_LOOK_PIXELS, FisheyeCamera
 from fisheye.lens import theta_to_radius
 from fisheye.polar import TWO_PI, PolarGrid
 
@@ -70,7 +70,8 @@ class ViewReference:
 MAX_SECOND_LOOK_PATCHES = 64
 SECOND_LOOK_PATCH_PX = (96, 256)  # a patch's side lies within these (multiples of 32)
 SECOND_LOOK_FULL_PIXELS = 12 * SECOND_LOOK_PATCH_PX[1] ** 2  # the default 12 patches, each at its largest
-MAX_SECOND_LOOK_PIXELS = MAX_SECOND_LOOK_PATCHES * SECOND_LOOK_PATCH_PX[1] ** 2
+# MAX_SECOND_LOOK_PIXELS (fisheye.camera, where a camera's record may set its own look): the
+# MAX_SECOND_LOOK_PATCHES patches at their largest.
 
 
 @dataclass(frozen=True)

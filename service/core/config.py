@@ -15,8 +15,8 @@ from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from contract.model import SpinningPolicy
 from contract.views import DEFAULT_VIEW
-from fisheye.camera import MAX_VIEW_PIXELS, MIN_VIEW_PIXELS
-from fisheye.view_plan import MAX_SECOND_LOOK_PIXELS, SECOND_LOOK_FULL_PIXELS
+from fisheye.camera import MAX_SECOND_LOOK_PIXELS, MAX_VIEW_PIXELS, MIN_VIEW_PIXELS
+from fisheye.view_plan import SECOND_LOOK_FULL_PIXELS
 from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
 from service.core.cpu import cpu_budget
 

@@ -128,6 +128,8 @@ def camera_to_message(camera: FisheyeCamera) -> pb.Camera:
         message.masks_px.append(pb.Polygon(points=[pb.Point(x=u, y=v) for u, v in polygon]))
     if camera.max_view_pixels is not None:
         message.max_view_pixels = camera.max_view_pixels
+    if camera.second_look_pixels is not None:
+        message.second_look_pixels = camera.second_look_pixels
     return message
 
 
@@ -153,6 +155,8 @@ def message_to_camera(message: pb.Camera) -> FisheyeCamera:
                               for polygon in message.masks_px]
     if message.HasField("max_view_pixels"):
         record["max_view_pixels"] = message.max_view_pixels
+    if message.HasField("second_look_pixels"):
+        record["second_look_pixels"] = message.second_look_pixels
     return camera_from_dict(record)
 
 

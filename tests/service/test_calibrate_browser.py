@@ -133,6 +133,7 @@ def test_calibrating_a_rendered_frame_by_clicking_its_marks(
     saved = registry_camera(server)
     assert saved["site_pose"] == GUESS["site_pose"]  # where the camera stands is not the lens's business
     assert saved["max_view_pixels"] == GUESS["max_view_pixels"]  # nor its own view budget
+    assert saved["second_look_pixels"] == GUESS["second_look_pixels"]  # nor its second look
     camera = load_camera(saved)
     assert floor_error_at_m(camera, 8.0) < 0.02
     assert floor_error_at_m(camera, 5.0) < 0.01
@@ -477,7 +478,8 @@ def test_the_page_sets_a_camera_view_budget(driver: Any, settings_for: Any) -> N
         return str(driver.execute_script("return document.getElementById('cal-view').textContent"))
 
     with LiveServer(settings_for(model=DEFAULT_MODEL_PATH)) as live:
-        assert httpx.put(f"{live.url}/v1/cameras/tape", json=GUESS).status_code == 201
+        no_look = {key: value for key, value in GUESS.items() if key != "second_look_pixels"}
+        assert httpx.put(f"{live.url}/v1/cameras/tape", json=no_look).status_code == 201
         open_calibrate(driver, live.url, "tape")
         wait_for(lambda: "view: 2band, " in shown(), "the camera's view")  # 2 M px: no nadir view
         assert "of this camera's 2,000,000; its people ask for 2,052,096 px" in shown()

@@ -9,7 +9,7 @@ from contextlib import AbstractContextManager
 import pytest
 from pydantic import ValidationError
 
-from fisheye.view_plan import MAX_SECOND_LOOK_PIXELS
+from fisheye.camera import MAX_SECOND_LOOK_PIXELS
 from service.runner import InferenceRunner
 
 

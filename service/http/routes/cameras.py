@@ -53,8 +53,10 @@ async def list_cameras(state: State) -> dict[str, list[dict[str, Any]]]:
                         "below the lens as a second, upright input; null where the budget leaves no room), "
                         "notes (a budget that binds), its `layout`, the `budget` it was planned within "
                         "(`source`: the server's `--max-view-pixels`, or the camera record's own "
-                        "`max_view_pixels`) and the `operating_point` its frames run at (the model's own "
-                        "for that layout where it has one).")
+                        "`max_view_pixels`), its `second_look` where it has one (its `source`: the "
+                        "server's `--second-look` or the record's own `second_look_pixels`) and the "
+                        "`operating_point` its frames run at (the model's own for that layout where it "
+                        "has one).")
 async def get_camera(state: State, camera_id: str = CameraId) -> dict[str, Any]:
     camera = await run_in_threadpool(state.registry.get, camera_id)
     if camera is None:
@@ -69,11 +71,19 @@ async def get_camera(state: State, camera_id: str = CameraId) -> dict[str, Any]:
         if camera.max_view_pixels is not None and camera.max_view_pixels > budget:
             notes.insert(0, f"the camera's max_view_pixels {camera.max_view_pixels} is over this server's "
                             f"limit: planned at {budget} px")
-        record["view"] = {**plan.public(), "notes": notes,
-                          "budget": {"max_pixels": budget,
-                                     "source": "server" if camera.max_view_pixels is None else "camera"},
+        public = plan.public()
+        look = public["second_look"]
+        if isinstance(look, dict):
+            public["second_look"] = {**look, "source": _source(camera.second_look_pixels)}
+        record["view"] = {**public, "notes": notes,
+                          "budget": {"max_pixels": budget, "source": _source(camera.max_view_pixels)},
                           "operating_point": {"min_score": point.min_score, "nms_iou": point.nms_iou}}
     return record
+
+
+def _source(own: int | None) -> str:
+    """Whose budget a camera's view was planned within: the camera record's own, or the server's."""
+    return "server" if own is None else "camera"
 
 
 def _plan_or_refuse(plan: Callable[[FisheyeCamera], ViewPlan | None], camera: FisheyeCamera
@@ -95,7 +105,9 @@ def _plan_or_refuse(plan: Callable[[FisheyeCamera], ViewPlan | None], camera: Fi
     summary="Create or replace a camera (the next frame uses it)",
     description="Body: the camera-file record of DESIGN.md as JSON; `id` may be left out and must "
                 "match the path when given; `max_view_pixels` gives the camera its own view budget, at "
-                "most the server's `--max-camera-view-pixels` (422 `view_budget_over_limit` above it). "
+                "most the server's `--max-camera-view-pixels` (422 `view_budget_over_limit` above it); "
+                "`second_look_pixels` its own second look in place of the server's `--second-look` "
+                "(0: none). "
                 "Answers 201 when the camera is new, 200 when replaced.",
     openapi_extra={"requestBody": {"required": True, "content": {
         "application/json": {"schema": _record_schema()}}}},

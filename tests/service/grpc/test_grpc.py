@@ -280,6 +280,7 @@ def test_registry_calls_and_token(server: LiveServer, demo_camera: FisheyeCamera
             own = pb.Camera()
             own.CopyFrom(camera)
             own.max_view_pixels = 2_000_000  # the camera's own view budget, within the server's limit
+            own.second_look_pixels = 786_432  # and its own second look
             out["own"] = await stub.PutCamera(pb.PutCameraRequest(camera=own), metadata=auth)
             out["own_read"] = await stub.GetCamera(pb.GetCameraRequest(camera_id="grpc-cam"))
             own.max_view_pixels = 4_000_001  # over the default limit: refused, nothing written
@@ -304,6 +305,8 @@ def test_registry_calls_and_token(server: LiveServer, demo_camera: FisheyeCamera
     assert out["invalid"] == grpc.StatusCode.INVALID_ARGUMENT
     assert out["own"].camera.max_view_pixels == out["own_read"].max_view_pixels == 2_000_000
     assert not out["put"].camera.HasField("max_view_pixels")
+    assert out["own"].camera.second_look_pixels == out["own_read"].second_look_pixels == 786_432
+    assert not out["put"].camera.HasField("second_look_pixels")
     assert out["over"][0] == grpc.StatusCode.INVALID_ARGUMENT and "view_budget_over_limit" in out["over"][1]
     assert out["after_over"].max_view_pixels == 2_000_000
     assert "grpc-cam" in [c.id for c in out["list"].cameras]

@@ -131,7 +131,7 @@ def test_a_planned_model_reports_each_camera_view(settings_for: Callable[..., Se
         points = httpx.get(f"{live.url}/v1/model").json()["view_operating_points"]
         assert view["layout"] == "1band+nadir+look" and view["operating_point"] == points["1band+nadir+look"]
         assert view["second_look"] == {"max_patches": 12, "zoom": 2.0, "patch_px": [96, 256],
-                                       "max_pixels": 786_432}
+                                       "max_pixels": 786_432, "source": "server"}
         assert view["input_wh"] == [1792, 416]
     with LiveServer(settings_for(model=DEFAULT_MODEL_PATH, max_view_pixels=4_000_000)) as live:
         view = httpx.get(f"{live.url}/v1/cameras/demo").json()["view"]
@@ -162,6 +162,46 @@ def test_a_camera_whose_view_cannot_be_planned_is_refused(settings_for: Callable
     with LiveServer(settings_for(model=DEFAULT_MODEL_PATH, max_view_pixels=4096)) as live:
         response = httpx.get(f"{live.url}/v1/cameras/demo")
         assert response.status_code == 422 and "budget of 4096 px" in response.json()["error"]["message"]
+
+
+def test_a_camera_record_sets_its_own_second_look(settings_for: Callable[..., Settings]) -> None:
+    # A crowded scene's camera takes the second look (its record's second_look_pixels) where the
+    # server runs none, and a camera may turn a server's look off for itself.
+    sample = (SAMPLES / "000001.jpg").read_bytes()
+    jpeg = {"Content-Type": "image/jpeg"}
+    with LiveServer(settings_for(model=DEFAULT_MODEL_PATH)) as live:
+        url = f"{live.url}/v1/cameras"
+        record = httpx.get(f"{url}/demo").json()
+        del record["view"]
+        saved = httpx.put(f"{url}/demo", json={**record, "second_look_pixels": 786_432})
+        assert saved.status_code == 200 and saved.json()["second_look_pixels"] == 786_432
+        view = httpx.get(f"{url}/demo").json()["view"]
+        points = httpx.get(f"{live.url}/v1/model").json()["view_operating_points"]
+        assert view["layout"] == "1band+nadir+look" and view["operating_point"] == points["1band+nadir+look"]
+        assert view["second_look"]["max_pixels"] == 786_432 and view["second_look"]["source"] == "camera"
+        assert view["budget"] == {"max_pixels": 900_000, "source": "server"}  # the view's budget is apart
+        assert httpx.put(f"{url}/twin", json={**record, "id": "twin"}).status_code == 201
+        assert httpx.get(f"{url}/twin").json()["view"]["second_look"] is None
+        looked = httpx.post(f"{url}/demo/detect", content=sample, headers=jpeg, timeout=60)
+        plain = httpx.post(f"{url}/twin/detect", content=sample, headers=jpeg, timeout=60)
+        assert looked.status_code == plain.status_code == 200
+        assert looked.json()["detections"] != plain.json()["detections"]
+        # out of range: refused, nothing written
+        for bad in (-1, 64 * 256 * 256 + 1, 1.5):
+            refused = httpx.put(f"{url}/demo", json={**record, "second_look_pixels": bad})
+            assert refused.status_code == 422 and refused.json()["error"]["code"] == "invalid_camera"
+            assert "second_look_pixels" in refused.json()["error"]["message"]
+        assert httpx.get(f"{url}/demo").json()["second_look_pixels"] == 786_432
+        # 0: no look for this camera, whatever the server's
+        no_look = {**record, "id": "twin", "second_look_pixels": 0}
+        assert httpx.put(f"{url}/twin", json=no_look).status_code == 200
+    with LiveServer(settings_for(model=DEFAULT_MODEL_PATH, second_look=300_000)) as live:
+        url = f"{live.url}/v1/cameras"
+        demo, twin = httpx.get(f"{url}/demo").json()["view"], httpx.get(f"{url}/twin").json()["view"]
+        assert demo["second_look"]["max_pixels"] == 786_432 and demo["second_look"]["source"] == "camera"
+        assert twin["layout"] == "1band+nadir" and twin["second_look"] is None
+        assert httpx.post(f"{url}/twin/detect", content=sample, headers=jpeg, timeout=60).json()[
+            "detections"] == plain.json()["detections"]
 
 
 def test_a_camera_record_sets_its_own_view_budget(settings_for: Callable[..., Settings]) -> None:
