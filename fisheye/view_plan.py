@@ -283,9 +283,11 @@ class ViewPlan:
             "nadir": None if self.nadir is None else {
                 "input_wh": [self.nadir.side, self.nadir.side], "half_px": round(self.nadir.half_px, 1),
                 "scale": round(self.nadir.scale, 4), "owned_radius_px": round(self.nadir.owned_px, 1)},
+            # the look's cost at most: its one run's px against the trained strip's, as `cost_ratio`
             "second_look": None if not self.second_look_patches else {
                 "max_patches": self.second_look_patches, "zoom": self.second_look_zoom,
-                "patch_px": list(SECOND_LOOK_PATCH_PX), "max_pixels": self.second_look_pixels},
+                "patch_px": list(SECOND_LOOK_PATCH_PX), "max_pixels": self.second_look_pixels,
+                "max_cost_ratio": round(self.second_look_pixels / self.reference_pixels, 3)},
             "notes": list(self.notes),
         }
 

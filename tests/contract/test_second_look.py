@@ -106,9 +106,11 @@ def test_the_view_names_and_reports_its_second_look(tmp_path: Path) -> None:
     camera = camera_from_dict(CAMERA)
     plan = view_plan(info, camera, LOOKING)
     assert plan.layout.endswith("+look") and plan.second_look_patches == LOOKING.second_look_patches
-    assert plan.public()["second_look"] == {"max_patches": 12, "zoom": 2.0,
-                                            "patch_px": list(SECOND_LOOK_PATCH_PX),
-                                            "max_pixels": SECOND_LOOK_FULL_PIXELS}
+    assert plan.public()["second_look"] == {
+        "max_patches": 12, "zoom": 2.0, "patch_px": list(SECOND_LOOK_PATCH_PX),
+        "max_pixels": SECOND_LOOK_FULL_PIXELS,
+        "max_cost_ratio": round(SECOND_LOOK_FULL_PIXELS / plan.reference_pixels, 3)}
+    assert plan.public()["cost_ratio"] == round(plan.pixels / plan.reference_pixels, 3)  # the same scale
     for off in (DEFAULT_VIEW, dataclasses.replace(LOOKING, second_look_patches=0)):  # by default: none
         without = view_plan(info, camera, off)
         assert without.public()["second_look"] is None and not without.layout.endswith("+look")

@@ -54,7 +54,8 @@ async def list_cameras(state: State) -> dict[str, list[dict[str, Any]]]:
                         "notes (a budget that binds), its `layout`, the `budget` it was planned within "
                         "(`source`: the server's `--max-view-pixels`, or the camera record's own "
                         "`max_view_pixels`), its `second_look` where it has one (its `source`: the "
-                        "server's `--second-look` or the record's own `second_look_pixels`) and the "
+                        "server's `--second-look` or the record's own `second_look_pixels`; "
+                        "`max_cost_ratio`: its px at most against the trained strip's) and the "
                         "`operating_point` its frames run at (the model's own for that layout where it "
                         "has one).")
 async def get_camera(state: State, camera_id: str = CameraId) -> dict[str, Any]:
