@@ -8,7 +8,9 @@
 
 Each model (a FishLoc ONNX file or training checkpoint) or zero-shot baseline (`rotations:ONNX`,
 `letterbox:ONNX`, `tiled:ONNX`: any COCO file of `../shared/pretrained/`, `detector.baselines`)
-is evaluated on every data set exactly as `fishloc eval` does, then timed on the frames of
+is evaluated on every data set exactly as `fishloc eval` does (with two rows or more, each row's
+`mPE_common` too: its feet over the people every row matches, `detector.metrics.common_errors`),
+then timed on the frames of
 `--frames` (encoded JPEGs of one size, as a camera sends them), or on those of an evaluation set,
 each with its own camera (`--time-on ANNOTATIONS`: real frames of several scenes and lenses, as the
 service would be sent them): *inference* is the model alone on
@@ -52,6 +54,7 @@ from contract.views import DEFAULT_VIEW
 from detector.baselines import LetterboxPredictor, RotatedCropsPredictor, TiledCocoModel
 from detector.data.readers import read_dataset
 from detector.evaluate import Predictor, RunnerPredictor, evaluate, frame_camera, json_safe, load_predictor
+from detector.metrics import common_errors, person_errors
 from fisheye import FisheyeCamera, load_camera
 from fisheye.view_plan import ViewPlanConfig
 from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
@@ -63,7 +66,7 @@ BASELINES: dict[str, Callable[[str, int], Predictor]] = {
     "letterbox": lambda path, threads: LetterboxPredictor(path, threads=threads),
 }
 REAL_COLUMNS = ("AP50", "precision", "recall", "AP50_radius_aligned")
-RENDER_COLUMNS = ("AP50", "mAP", "AP_near", "AP_mid", "AP_far", "mPE")
+RENDER_COLUMNS = ("AP50", "mAP", "AP_near", "AP_mid", "AP_far", "mPE", "mPE_common")
 
 
 @dataclass
@@ -240,7 +243,7 @@ def markdown(rows: dict[str, dict[str, Any]], datasets: list[str]) -> str:
     header = ["model"]
     for data in datasets:
         columns = REAL_COLUMNS if data.startswith("real") else RENDER_COLUMNS
-        header += [f"{data} {c}" + (" (m)" if c == "mPE" else "") for c in columns]
+        header += [f"{data} {c}" + (" (m)" if c.startswith("mPE") else "") for c in columns]
     header += ["inference p50 (ms)", "end to end p50 (ms)", "end to end p95 (ms)"]
     lines = ["| " + " | ".join(header) + " |", "|---" * len(header) + "|"]
     for name, row in rows.items():
@@ -248,7 +251,7 @@ def markdown(rows: dict[str, dict[str, Any]], datasets: list[str]) -> str:
         for data in datasets:
             metrics = row["metrics"].get(data, {})
             columns = REAL_COLUMNS if data.startswith("real") else RENDER_COLUMNS
-            cells += [_cell(metrics.get(c), c == "mPE") for c in columns]
+            cells += [_cell(metrics.get(c), c.startswith("mPE")) for c in columns]
         times = row.get("times", {})
         cells += [_cell(times.get(k), True) if times.get(k) is not None else "–"
                   for k in ("inference_p50_ms", "e2e_p50_ms", "e2e_p95_ms")]
@@ -289,9 +292,15 @@ def main(argv: list[str] | None = None) -> int:
     rows: dict[str, dict[str, Any]] = {e.name: {"metrics": {}} for e in entries}
     for data_name, path in datasets:
         frames = read_dataset(path)
+        people = {}
         for entry in entries:
             print(f"[compare] {entry.name} on {data_name}", file=sys.stderr)
-            rows[entry.name]["metrics"][data_name] = evaluate(entry.predictor, frames).metrics
+            evaluation = evaluate(entry.predictor, frames)
+            rows[entry.name]["metrics"][data_name] = evaluation.metrics
+            people[entry.name] = person_errors(evaluation.frames)
+        if len(entries) > 1:  # every row's feet over the people all of them match
+            for name, figures in common_errors(people).items():
+                rows[name]["metrics"][data_name].update(figures)
     if args.frames or args.time_on:
         print(f"[compare] timing on {args.frames or args.time_on}", file=sys.stderr)
         timed = (timing_frames(load_frames(args.frames), load_camera(args.camera)) if args.frames

@@ -14,7 +14,8 @@
   (`mPE_box_side`, ...) and by their box centre (`mPE_center`, ...), all on the same matches.
   These matches take every detection from the evaluation's lowest score (0.05), as AP does;
   `mPE_reported` (and `PE_matches_reported`) keeps those at or above the threshold of precision and
-  recall: the people the service reports, whose floor positions users get.
+  recall: the people the service reports, whose floor positions users get. `common_errors` gives
+  several models' `mPE_common` over the people all of them match, their feet compared alike.
 - precision / recall at one score threshold, matched at IoU 0.5; `recall_nadir` the recall of the
   people below the lens (box centre within 0.2 of the image circle's radius), seen from above.
 
@@ -220,13 +221,14 @@ def placement_points(frame: EvalFrame, det_index: NDArray[np.int64], placement: 
 
 
 def _localisation_errors(frame: EvalFrame, match: FrameMatch
-                         ) -> tuple[dict[str, FloatArray], FloatArray, FloatArray]:
-    """Errors (M,) m by each placement, GT distances (M,) m and detection scores (M,) of the IoU-0.5
-    matches with known positions; a match without a floor point by any placement is left out of
-    every one."""
+                         ) -> tuple[dict[str, FloatArray], FloatArray, FloatArray, NDArray[np.int64]]:
+    """Errors (M,) m by each placement, GT distances (M,) m, detection scores (M,) and the people's
+    indices (M,) in the frame of the IoU-0.5 matches with known positions; a match without a floor
+    point by any placement is left out of every one."""
     camera = frame.floor_camera
     if camera is None:
-        return {p: np.zeros(0) for p in PLACEMENT_SUFFIX}, np.zeros(0), np.zeros(0)
+        return ({p: np.zeros(0) for p in PLACEMENT_SUFFIX}, np.zeros(0), np.zeros(0),
+                np.zeros(0, dtype=np.int64))
     matched = greedy_match(match.iou, 0.5)
     det_index = match.order[matched >= 0]
     gt_index = matched[matched >= 0]
@@ -235,7 +237,7 @@ def _localisation_errors(frame: EvalFrame, match: FrameMatch
               for p in PLACEMENT_SUFFIX}
     valid = np.all(np.isfinite(np.stack(list(errors.values()))), axis=0)
     return ({p: e[valid] for p, e in errors.items()}, frame.gt_distances_m[gt_index][valid],
-            frame.det_scores[det_index][valid])
+            frame.det_scores[det_index][valid], gt_index[valid].astype(np.int64))
 
 
 def _localisation(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch], min_score: float | None = None
@@ -245,11 +247,44 @@ def _localisation(frames: Sequence[EvalFrame], prepared: Sequence[FrameMatch], m
     frame's own threshold; all False where a frame has neither)."""
     found = [_localisation_errors(f, m) for f, m in zip(frames, prepared, strict=True)]
     reported = [scores >= _threshold_or_inf(frame, min_score)
-                for frame, (_, _, scores) in zip(frames, found, strict=True)]
-    distances = np.concatenate([d for _, d, _ in found]) if found else np.zeros(0)
-    return (distances, {p: np.concatenate([e[p] for e, _, _ in found]) if found else np.zeros(0)
+                for frame, (_, _, scores, _) in zip(frames, found, strict=True)]
+    distances = np.concatenate([d for _, d, _, _ in found]) if found else np.zeros(0)
+    return (distances, {p: np.concatenate([e[p] for e, _, _, _ in found]) if found else np.zeros(0)
                         for p in PLACEMENT_SUFFIX},
             np.concatenate(reported) if reported else np.zeros(0, dtype=bool))
+
+
+PersonKey = tuple[int, int]  # (frame index in its set, person index in its frame)
+
+
+def person_errors(frames: Sequence[EvalFrame]) -> dict[PersonKey, tuple[float, float]]:
+    """Each person the `mPE` matches hold (IoU 0.5, a floor point), keyed by frame and person index:
+    (foot error m, GT distance m). Two models' dictionaries on the same frames compare the feet of
+    the people both found (`common_errors`)."""
+    people: dict[PersonKey, tuple[float, float]] = {}
+    for index, frame in enumerate(frames):
+        errors, distances, _, gt_index = _localisation_errors(frame, prepare_match(frame))
+        for person, error, distance in zip(gt_index, errors[FOOT], distances, strict=True):
+            people[(index, int(person))] = (float(error), float(distance))
+    return people
+
+
+def common_errors(models: dict[str, dict[PersonKey, tuple[float, float]]]) -> dict[str, dict[str, float]]:
+    """For each model (its `person_errors` on the same frames), the foot error over the people that
+    every model matches: `mPE_common`, `PE_near_common`, ... by GT distance, and their count
+    `PE_matches_common`. `mPE` averages over the people each model finds, so a model that finds
+    more of the far people, whose feet are the hardest, scores a higher `mPE` with feet no worse
+    than another's; over the same people the feet themselves are compared."""
+    keys = sorted(set.intersection(*(set(people) for people in models.values()))) if models else []
+    result: dict[str, dict[str, float]] = {}
+    for name, people in models.items():
+        errors = np.array([people[key][0] for key in keys], dtype=np.float64)
+        distances = np.array([people[key][1] for key in keys], dtype=np.float64)
+        figures = {"mPE_common": _mean(errors), "PE_matches_common": float(len(keys))}
+        for bin_name, (low, high) in DISTANCE_BINS_M.items():
+            figures[f"PE_{bin_name}_common"] = _mean(errors[(distances >= low) & (distances < high)])
+        result[name] = figures
+    return result
 
 
 def _threshold_or_inf(frame: EvalFrame, min_score: float | None) -> float:

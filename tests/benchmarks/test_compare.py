@@ -33,6 +33,23 @@ def test_compare_table_and_json(tmp_path: Path, capsys: pytest.CaptureFixture[st
     assert record["rows"]["letterbox"]["times"]["inference_p50_ms"] is None
 
 
+def test_rows_compare_their_feet_over_the_people_all_of_them_match(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "compare.json"
+    model = ROOT / "models" / "fishloc-default.onnx"
+    assert main(["--model", f"shipped={model}", "--model", f"small view={model}@300000",
+                 "--data", f"samples={ROOT / 'samples' / 'annotations.json'}", "--json", str(out)]) == 0
+    assert "samples mPE_common (m)" in capsys.readouterr().out
+    rows = json.loads(out.read_text())["rows"]
+    shipped, small = (rows[name]["metrics"]["samples"] for name in ("shipped", "small view"))
+    # The smaller view matches fewer of the samples' people; both rows' feet are then compared
+    # over those both match, fewer than the shipped view's own matches.
+    assert small["PE_matches"] < shipped["PE_matches"]
+    assert 0 < shipped["PE_matches_common"] == small["PE_matches_common"] <= small["PE_matches"]
+    assert shipped["PE_matches_common"] < shipped["PE_matches"]
+    assert shipped["mPE_common"] != shipped["mPE"]
+
+
 def test_a_model_spec_names_the_budget_and_other_fields_of_the_plan() -> None:
     from benchmarks.compare import view_from_spec
 

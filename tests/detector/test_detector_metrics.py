@@ -6,7 +6,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from detector.metrics import EvalFrame, average_precision, compute_metrics, greedy_match
+from detector.metrics import (
+    EvalFrame,
+    average_precision,
+    common_errors,
+    compute_metrics,
+    greedy_match,
+    person_errors,
+)
 from fisheye import camera_from_dict, cepdof_to_radius_aligned, cxcywh_to_corners, polygon_iou
 from fisheye.boxes import cepdof_to_corners
 
@@ -224,3 +231,31 @@ def test_ap_at_low_iou_counts_a_person_found_with_a_loose_box() -> None:
     metrics = compute_metrics([_frame([person], [[0.0, 1.0]], [loose], [0.9])], min_score=0.5)
     assert metrics["AP50"] == 0.0
     assert metrics["AP30"] == pytest.approx(1.0) and metrics["AP10"] == pytest.approx(1.0)
+
+
+def test_feet_compared_over_the_people_every_model_matches() -> None:
+    # Three people. Model a finds the first two, each foot point a px off (a few cm on the floor);
+    # model b finds all three, the first two placed exactly and the third (θ 1.4, 17 m out) 15 px
+    # too far out, metres off. b's mPE is the larger, yet over the two people both find its feet
+    # are the better ones.
+    near, second, far = [199.5, 119.5, 16.0, 40.0], [279.5, 199.5, 40.0, 16.0], [199.5, 49.5, 16.0, 20.0]
+    truth = [[0.0, 3 * math.tan(0.6)], [3 * math.tan(0.6), 0.0], [0.0, 3 * math.tan(1.4)]]
+    frame = _frame([near, second, far], truth, [near, second, far], [0.9, 0.8, 0.7])
+    exact = np.array([[199.5, 139.5], [259.5, 199.5], [199.5, 59.5]])  # 60, 60 and 140 px out
+    off = exact.copy()
+    off[:2, 1] -= 1.0
+    model_a = replace(frame, det_boxes=frame.det_boxes[:2], det_scores=frame.det_scores[:2],
+                      det_foot_px=off[:2])
+    model_b = replace(frame, det_foot_px=exact + np.array([[0.0, 0.0], [0.0, 0.0], [0.0, -15.0]]))
+    people_a, people_b = person_errors([model_a]), person_errors([model_b])
+    assert sorted(people_a) == [(0, 0), (0, 1)] and sorted(people_b) == [(0, 0), (0, 1), (0, 2)]
+    assert people_b[(0, 0)][0] == pytest.approx(0.0, abs=1e-9)
+    assert people_a[(0, 0)][0] > 0.01
+    common = common_errors({"a": people_a, "b": people_b})
+    assert common["a"]["PE_matches_common"] == common["b"]["PE_matches_common"] == 2
+    assert common["b"]["mPE_common"] < common["a"]["mPE_common"]
+    metrics_a, metrics_b = compute_metrics([model_a], 0.5), compute_metrics([model_b], 0.5)
+    assert metrics_b["mPE"] > metrics_a["mPE"]  # the far person's error counts in b's alone
+    assert common["a"]["mPE_common"] == pytest.approx(metrics_a["mPE"])
+    assert math.isnan(common["a"]["PE_far_common"])  # neither of the two stands past 20 m
+    assert common_errors({"only": people_b})["only"]["mPE_common"] == pytest.approx(metrics_b["mPE"])
