@@ -34,7 +34,7 @@ from contract.views import (
     prepare_input,
 )
 from fisheye import FisheyeCamera, foot_points, rotated_iou, rotated_nms
-from fisheye.view_plan import ViewPlanConfig
+from fisheye.view_plan import ViewPlanConfig, view_layout
 
 FloatArray = NDArray[np.float64]
 
@@ -135,13 +135,24 @@ def select_looking(model: ContractModel, raw: RawOutputs, mapping: InputMapping,
                    nms_iou: float | None, max_detections: int = 300) -> FrameDetections:
     """`select_detections` with the second look (`second_look`) of a view that has it: the first
     look's detections from `look.FIRST_LOOK_FLOOR` (or `min_score`, where lower) looked at again in
-    `image`, the decoded frame at `scale_xy` of the frame's size, then `min_score` applied. The
-    service's pipeline and `ModelRunner` both select so, that what is evaluated is what is served."""
+    `image`, the decoded frame at `scale_xy` of the frame's size; the scores of the nadir view's
+    disc put on the look's threshold (`look.nadir_scores`), then `min_score` applied. The service's
+    pipeline and `ModelRunner` both select so, that what is evaluated is what is served."""
     if not looks_again(mapping):
         return select_detections(raw, mapping, principal_point, min_score, nms_iou, max_detections)
     first = select_detections(raw, mapping, principal_point, min(min_score, look.FIRST_LOOK_FLOOR), nms_iou,
                               max_detections)
-    return above(second_look(model, image, scale_xy, mapping, first, nms_iou, max_detections), min_score)
+    looked = second_look(model, image, scale_xy, mapping, first, nms_iou, max_detections)
+    plan = mapping.plan
+    without_look = view_layout(len(plan.bands), plan.nadir is not None)
+    scores = look.nadir_scores(plan, looked.boxes_cxcywh, looked.scores, principal_point,
+                               model.info.point_for(plan.layout).min_score,
+                               model.info.point_for(without_look).min_score)
+    order = np.argsort(-scores, kind="stable")
+    return above(dataclasses.replace(looked, boxes_cxcywh=looked.boxes_cxcywh[order],
+                                     scores=scores[order].astype(looked.scores.dtype),
+                                     foot_px=None if looked.foot_px is None else looked.foot_px[order]),
+                 min_score)
 
 
 def second_look(model: ContractModel, image: NDArray[np.uint8], scale_xy: tuple[float, float],

@@ -14,8 +14,9 @@ overhead once per patch.
 A patch adds the people it finds whole, away from its edges, no longer than a looked-at person may
 be, and not mostly inside a first-look detection that was not looked at again (a part of a larger
 person); they join the first look's detections before the NMS runs again, and one the first look
-found too stands at the first look's foot point. docs/DETECTOR.md, "A second look", has the
-designs measured and the figures.
+found too stands at the first look's foot point. The people of the nadir view's disc, which no
+patch looks at, keep the threshold of the view without the look (`nadir_scores`).
+docs/DETECTOR.md, "A second look", has the designs measured and the figures.
 """
 
 from __future__ import annotations
@@ -143,6 +144,28 @@ def parts_of(band: PolarGrid, boxes_cxcywh: FloatArray, others_cxcywh: FloatArra
     across, along = overlap(0, 2), overlap(1, 3)
     area = np.maximum((a[:, 2] - a[:, 0]) * (a[:, 3] - a[:, 1]), 1e-6)
     return np.asarray((across * along / area[:, None]).max(axis=1) >= PART_OF, dtype=bool)
+
+
+def nadir_scores(plan: ViewPlan, boxes_cxcywh: FloatArray, scores: FloatArray,
+                 principal_point: tuple[float, float], threshold: float, nadir_threshold: float
+                 ) -> FloatArray:
+    """(N,) the scores of a view with the look put on its one `threshold` (its operating point's):
+    a person centred in the nadir view's disc (`NadirPiece.owned_px`), where no patch looks, is held
+    to `nadir_threshold`, the point of the same view without the look. That point was chosen for the
+    disc's people and the first look's; the look's point is higher for its patches' people in the
+    bands. Scores in the disc are mapped piecewise linearly, 0 to 0, `nadir_threshold` to
+    `threshold` and 1 to 1: the disc's order stays, and the disc's people pass `threshold` where they
+    pass `nadir_threshold`. Other scores, and every score of a view without a nadir view, are
+    unchanged."""
+    mapped = np.asarray(scores, dtype=np.float64).copy()
+    if plan.nadir is None or not len(mapped) or threshold == nadir_threshold:
+        return mapped
+    pp = np.asarray(principal_point, dtype=np.float64)
+    inside = np.hypot(*(boxes_cxcywh[:, :2] - pp).T) < plan.nadir.owned_px
+    low = mapped * threshold / nadir_threshold
+    high = threshold + (mapped - nadir_threshold) * (1.0 - threshold) / (1.0 - nadir_threshold)
+    mapped[inside] = np.where(mapped <= nadir_threshold, low, high)[inside]
+    return mapped
 
 
 @dataclass(frozen=True)

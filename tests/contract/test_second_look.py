@@ -196,6 +196,53 @@ def test_the_pipeline_adds_what_the_patch_finds_at_its_zoom(tmp_path: Path) -> N
     assert len(above_all.detections) == 0
 
 
+def test_the_nadir_discs_people_keep_the_threshold_of_the_view_without_the_look(tmp_path: Path) -> None:
+    # The view's own point keeps people from 0.24, the look's from 0.3 (for its patches' people).
+    # A person scoring 0.27 below the lens, where no patch looks, is still reported with the look;
+    # one at the same score in the band is looked at again, scores 0.27 in its patch too, and is not.
+    points = '{"1band+nadir": {"min_score": 0.24, "nms_iou": 0.35}, ' \
+             '"1band+nadir+look": {"min_score": 0.3, "nms_iou": 0.35}}'
+    path = save_polar_double(tmp_path / "planned.onnx", planned=True, score=0.27,
+                             metadata={**METADATA, "fishloc.view_operating_points": points})
+    model = OnnxModel(path, SessionThreads(1))
+    camera = camera_from_dict(CAMERA)
+    view = dataclasses.replace(LOOKING, scales=(1.0,))
+    plan = view_plan(model.info, camera, view)
+    assert plan.layout == "1band+nadir+look" and plan.nadir is not None
+    looking = Pipeline(model, PipelineConfig(view=view))
+    plain = Pipeline(model, PipelineConfig(view=dataclasses.replace(view, second_look_pixels=0)))
+    below, uv = _disc_frame(camera, (0.0, 0.0))
+    away, _ = _disc_frame(camera, (2.0, 1.5))
+    found = looking.detect(below, camera).detections
+    assert len(found.scores) >= 1
+    nearest = int(np.argmin(np.hypot(*(found.cxcywh[:, :2] - uv).T)))
+    assert np.hypot(*(found.cxcywh[nearest, :2] - uv)) < plan.nadir.owned_px
+    assert found.scores[nearest] >= 0.3  # 0.27 on the view's scale: 0.24 -> 0.3
+    assert len(plain.detect(below, camera).detections.scores) >= 1
+    assert len(looking.detect(away, camera).detections.scores) == 0
+    assert len(plain.detect(away, camera).detections.scores) == 1
+
+
+def test_nadir_scores_map_the_view_threshold_to_the_looks_in_the_disc_alone(tmp_path: Path) -> None:
+    camera = camera_from_dict(CAMERA)
+    plan = view_plan(_info(tmp_path), camera, dataclasses.replace(LOOKING, scales=(1.0,)))
+    assert plan.nadir is not None
+    pp = (float(camera.principal_point[0]), float(camera.principal_point[1]))
+    inside = np.repeat(_box(np.asarray(pp), 0.5 * plan.nadir.owned_px, 1.0, 40.0, 40.0), 5, axis=0)
+    outside = _box(np.asarray(pp), 2.0 * plan.nadir.owned_px, 1.0, 40.0, 40.0)
+    scores = np.array([0.0, 0.12, 0.24, 0.27, 1.0, 0.27])
+    mapped = look.nadir_scores(plan, np.concatenate([inside, outside]), scores, pp, 0.3, 0.24)
+    np.testing.assert_allclose(mapped[:5], [0.0, 0.15, 0.3, 0.3 + 0.03 * 0.7 / 0.76, 1.0])
+    assert mapped[5] == 0.27  # outside the disc: as the network scored it
+    assert np.all(np.diff(mapped[:5]) > 0)  # the disc's order stays
+    np.testing.assert_array_equal(look.nadir_scores(plan, np.concatenate([inside, outside]), scores, pp,
+                                                    0.3, 0.3), scores)
+    no_nadir = view_plan(_info(tmp_path), camera, ONE_BAND)
+    assert no_nadir.nadir is None
+    np.testing.assert_array_equal(look.nadir_scores(no_nadir, np.concatenate([inside, outside]), scores, pp,
+                                                    0.3, 0.24), scores)
+
+
 class _PatchModel:
     """A model that answers every patch with one box, given in that patch's px, and its foot 30 px
     below the box's bottom: a stand-in for the network, to check what the second look keeps."""
