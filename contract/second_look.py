@@ -155,10 +155,11 @@ def nadir_scores(plan: ViewPlan, boxes_cxcywh: FloatArray, scores: FloatArray,
     disc's people and the first look's; the look's point is higher for its patches' people in the
     bands. Scores in the disc are mapped piecewise linearly, 0 to 0, `nadir_threshold` to
     `threshold` and 1 to 1: the disc's order stays, and the disc's people pass `threshold` where they
-    pass `nadir_threshold`. Other scores, and every score of a view without a nadir view, are
-    unchanged."""
+    pass `nadir_threshold`. Other scores, and every score of a view without a nadir view or of
+    thresholds equal or at 0 or 1 (no scale to map between), are unchanged."""
     mapped = np.asarray(scores, dtype=np.float64).copy()
-    if plan.nadir is None or not len(mapped) or threshold == nadir_threshold:
+    if (plan.nadir is None or not len(mapped) or threshold == nadir_threshold
+            or not (0.0 < threshold < 1.0 and 0.0 < nadir_threshold < 1.0)):
         return mapped
     pp = np.asarray(principal_point, dtype=np.float64)
     inside = np.hypot(*(boxes_cxcywh[:, :2] - pp).T) < plan.nadir.owned_px

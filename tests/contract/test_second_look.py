@@ -237,6 +237,9 @@ def test_nadir_scores_map_the_view_threshold_to_the_looks_in_the_disc_alone(tmp_
     assert np.all(np.diff(mapped[:5]) > 0)  # the disc's order stays
     np.testing.assert_array_equal(look.nadir_scores(plan, np.concatenate([inside, outside]), scores, pp,
                                                     0.3, 0.3), scores)
+    for edge in ((1.0, 0.24), (0.3, 0.0)):  # a point at 0 or 1: nothing to map between
+        np.testing.assert_array_equal(look.nadir_scores(plan, np.concatenate([inside, outside]), scores, pp,
+                                                        *edge), scores)
     no_nadir = view_plan(_info(tmp_path), camera, ONE_BAND)
     assert no_nadir.nadir is None
     np.testing.assert_array_equal(look.nadir_scores(no_nadir, np.concatenate([inside, outside]), scores, pp,
