@@ -6,7 +6,8 @@ a stride-8 level finds at all: such people come out with low scores, loose boxes
 neighbour's box. The second look takes the frame's small, uncertain detections (score below
 `BELOW_SCORE`, fewer than `MAX_ALONG_PX` band rows along the ray, not over the principal point),
 the `patches` highest-scoring of them, and unwraps a patch about each: the same polar unwrap as the
-detection's band at `zoom` times its rows and columns, three times the box's size each way (within
+detection's band at `zoom` times its rows and columns (more for a far person, to bring it to
+`target_rows` rows: `ViewPlan.second_look_zoom_for`), three times the box's size each way (within
 `fisheye.view_plan.SECOND_LOOK_PATCH_PX`), sampled from the decoded frame; as many as fit in the
 look's own budget of input px (`ViewPlan.second_look_pixels`: 0, no look, by default). A frame's
 patches are packed into one input (`pack`, `Canvas`) and run at once: a run each paid the runs'
@@ -97,7 +98,7 @@ def plan_patches(plan: ViewPlan, boxes_cxcywh: FloatArray, scores: FloatArray,
         x1, y1, x2, y2 = band.radius_aligned_to_polar(boxes_cxcywh[index:index + 1])[0]
         if y2 - y1 >= MAX_ALONG_PX:
             continue
-        zoom = plan.second_look_zoom
+        zoom = plan.second_look_zoom_for(y2 - y1)
         rows_per_px = band.px_per_radius_px * zoom
         width = round(band.width * zoom)
         height, span = _side(PATCH_EXTENT * (y2 - y1) * zoom), _side(PATCH_EXTENT * (x2 - x1) * zoom)

@@ -70,6 +70,7 @@ class ViewReference:
 MAX_SECOND_LOOK_PATCHES = 64
 SECOND_LOOK_PATCH_PX = (96, 256)  # a patch's side lies within these (multiples of 32)
 SECOND_LOOK_FULL_PIXELS = 12 * SECOND_LOOK_PATCH_PX[1] ** 2  # the default 12 patches, each at its largest
+SECOND_LOOK_MAX_ZOOM = 4.0  # a patch's zoom over its band at most (`ViewPlanConfig.second_look_target_rows`)
 # MAX_SECOND_LOOK_PIXELS (fisheye.camera, where a camera's record may set its own look): the
 # MAX_SECOND_LOOK_PATCHES patches at their largest.
 
@@ -137,9 +138,15 @@ class ViewPlanConfig:
     # default view's time is the frame's and the look costs 1.2-1.8x it (the benchmark's renders to
     # crowded real frames); `SECOND_LOOK_FULL_PIXELS`, 12 patches' px at their largest (the canvas
     # of 12 such takes more: its last patches are left out). 0 patches: none at any budget.
+    # A person shorter than `second_look_target_rows` / `second_look_zoom` band rows along the ray
+    # (a far one, under 24 rows) is zoomed further, to come out `second_look_target_rows` long in
+    # its patch, at most `SECOND_LOOK_MAX_ZOOM` times its band: 48 was chosen on the validation
+    # renders (AP_far 0.412 -> 0.432) over 40, 56 and 64 (0.409, 0.404, 0.366) and 0, a patch at
+    # `second_look_zoom` whatever its person's size (docs/DETECTOR.md, "A second look").
     second_look_patches: int = 12
     second_look_zoom: float = 2.0
     second_look_pixels: int = 0
+    second_look_target_rows: float = 48.0
 
     def __post_init__(self) -> None:
         if not self.scales or any(not (0.25 <= s <= 4.0) for s in self.scales) or (
@@ -160,10 +167,13 @@ class ViewPlanConfig:
             raise ValueError(f"outer_row_scale must lie within the scales {self.scales}, got "
                              f"{self.outer_row_scale}")
         looks = 0 <= self.second_look_patches <= MAX_SECOND_LOOK_PATCHES
-        if not (looks and 1.0 < self.second_look_zoom <= 4.0):
+        if not (looks and 1.0 < self.second_look_zoom <= SECOND_LOOK_MAX_ZOOM):
             raise ValueError(f"second_look_patches must lie in [0, {MAX_SECOND_LOOK_PATCHES}] and "
                              f"second_look_zoom in (1, 4], got {self.second_look_patches} and "
                              f"{self.second_look_zoom}")
+        if not 0 <= self.second_look_target_rows <= SECOND_LOOK_PATCH_PX[1] / 3:
+            raise ValueError(f"second_look_target_rows must lie in [0, {SECOND_LOOK_PATCH_PX[1] / 3:g}] (a "
+                             f"patch spans three times its person), got {self.second_look_target_rows}")
         if not 0 <= self.second_look_pixels <= MAX_SECOND_LOOK_PIXELS:
             raise ValueError(f"second_look_pixels must lie in [0, {MAX_SECOND_LOOK_PIXELS}], got "
                              f"{self.second_look_pixels}")
@@ -241,10 +251,18 @@ class ViewPlan:
     # nadir view), before any budget: a budget of at least this plans it whole.
     wanted_pixels: int = 0
     # The second look's patches at most (`ViewPlanConfig.second_look_patches`; 0: none), their
-    # zoom over their band's scale, and the input px they may take in all.
+    # zoom over their band's scale, and the input px they may take in all; a smaller person's patch
+    # zoomed to bring it to `second_look_target_rows` rows (`SECOND_LOOK_MAX_ZOOM` at most).
     second_look_patches: int = 0
     second_look_zoom: float = 2.0
     second_look_pixels: int = 0
+    second_look_target_rows: float = 0.0
+
+    def second_look_zoom_for(self, along_rows: float) -> float:
+        """The zoom of a patch about a person `along_rows` band rows long: `second_look_zoom`, or
+        more for a person so short that it would come out under `second_look_target_rows`."""
+        wanted = self.second_look_target_rows / max(along_rows, 1e-6)
+        return max(self.second_look_zoom, min(wanted, SECOND_LOOK_MAX_ZOOM))
 
     @property
     def owned_px(self) -> tuple[tuple[float, float], ...]:
@@ -286,6 +304,9 @@ class ViewPlan:
             # the look's cost at most: its one run's px against the trained strip's, as `cost_ratio`
             "second_look": None if not self.second_look_patches else {
                 "max_patches": self.second_look_patches, "zoom": self.second_look_zoom,
+                "target_rows": self.second_look_target_rows,
+                "max_zoom": max(self.second_look_zoom, SECOND_LOOK_MAX_ZOOM) if self.second_look_target_rows
+                else self.second_look_zoom,
                 "patch_px": list(SECOND_LOOK_PATCH_PX), "max_pixels": self.second_look_pixels,
                 "max_cost_ratio": round(self.second_look_pixels / self.reference_pixels, 3)},
             "notes": list(self.notes),
@@ -547,7 +568,7 @@ def plan_view(camera: FisheyeCamera, reference: ViewReference | None = None,
         look_pixels = 0
     return ViewPlan(grids, offsets, canvas, tuple(bands), smallest, reference.pixels, tuple(notes), nadir,
                     wanted_pixels, config.second_look_patches if look_pixels else 0, config.second_look_zoom,
-                    look_pixels)
+                    look_pixels, config.second_look_target_rows)
 
 
 def _strip_from(bands: list[ViewBand], camera: FisheyeCamera, rows_per_px: float, config: ViewPlanConfig

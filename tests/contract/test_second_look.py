@@ -23,7 +23,12 @@ from contract import second_look as look
 from contract.detect import second_look
 from contract.views import DEFAULT_VIEW, PlannedInput, PolarInput, view_plan
 from fisheye import camera_from_dict
-from fisheye.view_plan import SECOND_LOOK_FULL_PIXELS, SECOND_LOOK_PATCH_PX, ViewPlanConfig
+from fisheye.view_plan import (
+    SECOND_LOOK_FULL_PIXELS,
+    SECOND_LOOK_MAX_ZOOM,
+    SECOND_LOOK_PATCH_PX,
+    ViewPlanConfig,
+)
 from service.pipeline import Pipeline, PipelineConfig
 
 CAMERA = {"id": "cam", "altitude_m": 3.0, "image_size": [1024, 1024], "principal_point": [511.5, 511.5],
@@ -57,8 +62,11 @@ def test_patches_go_to_small_uncertain_detections_at_the_zoom_of_their_band(tmp_
     patches = look.plan_patches(plan, boxes, scores, (float(pp[0]), float(pp[1])))
     assert [p.detection for p in patches] == [1]
     grid = patches[0].grid
-    assert grid.width == round(band.width * plan.second_look_zoom)
-    assert grid.px_per_radius_px == pytest.approx(band.px_per_radius_px * plan.second_look_zoom, rel=1e-6)
+    # 30 frame px are under 4 rows of the double's coarse band: zoomed as far as a patch may be
+    zoom = plan.second_look_zoom_for(30.0 * band.px_per_radius_px)
+    assert zoom == SECOND_LOOK_MAX_ZOOM
+    assert grid.width == round(band.width * zoom)
+    assert grid.px_per_radius_px == pytest.approx(band.px_per_radius_px * zoom, rel=1e-6)
     width, height = grid.strip_wh
     assert all(SECOND_LOOK_PATCH_PX[0] <= side <= SECOND_LOOK_PATCH_PX[1] and side % 32 == 0
                for side in (width, height))
@@ -66,6 +74,33 @@ def test_patches_go_to_small_uncertain_detections_at_the_zoom_of_their_band(tmp_
     np.testing.assert_allclose(centre, [(width - 1) / 2, (height - 1) / 2], atol=1.0)
     assert look.plan_patches(dataclasses.replace(plan, second_look_patches=0), boxes, scores,
                              (float(pp[0]), float(pp[1]))) == []
+
+
+def test_a_far_persons_patch_is_zoomed_to_the_target_rows(tmp_path: Path) -> None:
+    camera = camera_from_dict(CAMERA)
+    plan = view_plan(_info(tmp_path), camera, ONE_BAND)
+    target = plan.second_look_target_rows
+    assert target == ONE_BAND.second_look_target_rows > 0
+    # long enough at the zoom of every patch: that zoom; shorter: zoomed to the target, up to 4x
+    assert plan.second_look_zoom_for(target / plan.second_look_zoom) == plan.second_look_zoom
+    assert plan.second_look_zoom_for(40.0) == plan.second_look_zoom
+    assert plan.second_look_zoom_for(target / 3) == pytest.approx(3.0)
+    assert plan.second_look_zoom_for(target / 8) == SECOND_LOOK_MAX_ZOOM
+    fixed = view_plan(_info(tmp_path), camera, dataclasses.replace(ONE_BAND, second_look_target_rows=0))
+    assert fixed.second_look_zoom_for(2.0) == fixed.second_look_zoom
+    # in the frame: a person 16 band rows long comes out 48 rows long in its patch
+    band = look.band_grids(plan)[0]
+    pp = np.asarray(camera.principal_point)
+    person = _box(pp, 400.0, 1.0, (target / 3) / band.px_per_radius_px, 40.0)
+    patch = look.plan_patches(plan, person, np.array([0.3]), (float(pp[0]), float(pp[1])))[0]
+    _, y1, _, y2 = patch.grid.radius_aligned_to_polar(person)[0]
+    assert y2 - y1 == pytest.approx(target, rel=0.02)
+
+
+@pytest.mark.parametrize("rows", [-1.0, SECOND_LOOK_PATCH_PX[1] / 3 + 1])
+def test_a_target_that_no_patch_could_hold_is_refused(rows: float) -> None:
+    with pytest.raises(ValueError, match="second_look_target_rows"):
+        dataclasses.replace(LOOKING, second_look_target_rows=rows)
 
 
 def test_at_most_the_planned_number_of_patches_best_scores_first(tmp_path: Path) -> None:
@@ -107,7 +142,8 @@ def test_the_view_names_and_reports_its_second_look(tmp_path: Path) -> None:
     plan = view_plan(info, camera, LOOKING)
     assert plan.layout.endswith("+look") and plan.second_look_patches == LOOKING.second_look_patches
     assert plan.public()["second_look"] == {
-        "max_patches": 12, "zoom": 2.0, "patch_px": list(SECOND_LOOK_PATCH_PX),
+        "max_patches": 12, "zoom": 2.0, "target_rows": 48.0, "max_zoom": SECOND_LOOK_MAX_ZOOM,
+        "patch_px": list(SECOND_LOOK_PATCH_PX),
         "max_pixels": SECOND_LOOK_FULL_PIXELS,
         "max_cost_ratio": round(SECOND_LOOK_FULL_PIXELS / plan.reference_pixels, 3)}
     assert plan.public()["cost_ratio"] == round(plan.pixels / plan.reference_pixels, 3)  # the same scale
@@ -174,22 +210,27 @@ def _disc_frame(camera: object, xy_m: tuple[float, float]) -> tuple[bytes, np.nd
 
 def test_the_pipeline_adds_what_the_patch_finds_at_its_zoom(tmp_path: Path) -> None:
     # The double boxes the bright disc with BOX_WH input px whatever the input: in the patch, at
-    # twice the band's rows and columns a frame px, that box is half the first look's in the frame,
-    # on the same centre. Its score (0.5) is under BELOW_SCORE, so the first look's box gets a patch.
+    # `zoom` times the band's rows and columns a frame px, that box is 1 / zoom of the first look's
+    # in the frame, on the same centre: 2 for every patch, 48 / 20 = 2.4 where a person under 24
+    # band rows is zoomed to 48 (`second_look_target_rows`). Its score (0.5) is under BELOW_SCORE, so
+    # the first look's box gets a patch.
     path = save_polar_double(tmp_path / "planned.onnx", planned=True, score=0.5)
     model = OnnxModel(path, SessionThreads(1))
     camera = camera_from_dict(CAMERA)
     data, uv = _disc_frame(camera, (2.0, 1.5))
-    looking = Pipeline(model, PipelineConfig(view=ONE_BAND)).detect(data, camera, min_score=0.3).detections
     plain = Pipeline(model, PipelineConfig(view=dataclasses.replace(ONE_BAND, second_look_pixels=0))).detect(
         data, camera, min_score=0.3).detections
-    assert len(plain.scores) == 1 and len(looking.scores) == 2
+    assert len(plain.scores) == 1
     first = plain.cxcywh[0]
-    np.testing.assert_allclose(looking.cxcywh[0], first, atol=1e-3)  # the first look's box stays
-    second = looking.cxcywh[1]
-    # on the disc, as the first look's box is (the patch's columns are finer: it may be nearer)
-    assert np.hypot(*(second[:2] - uv)) <= max(np.hypot(*(first[:2] - uv)), 1.5)
-    np.testing.assert_allclose(second[2:], first[2:] / 2, rtol=0.05)
+    for view, zoom in ((dataclasses.replace(ONE_BAND, second_look_target_rows=0), 2.0), (ONE_BAND, 2.4)):
+        assert view_plan(model.info, camera, view).second_look_zoom_for(BOX_WH[1]) == pytest.approx(zoom)
+        looking = Pipeline(model, PipelineConfig(view=view)).detect(data, camera, min_score=0.3).detections
+        assert len(looking.scores) == 2
+        np.testing.assert_allclose(looking.cxcywh[0], first, atol=1e-3)  # the first look's box stays
+        second = looking.cxcywh[1]
+        # on the disc, as the first look's box is (the patch's columns are finer: it may be nearer)
+        assert np.hypot(*(second[:2] - uv)) <= max(np.hypot(*(first[:2] - uv)), 1.5)
+        np.testing.assert_allclose(second[2:], first[2:] / zoom, rtol=0.05)
     assert BOX_WH[1] / 2 < look.MAX_ALONG_PX
     # a threshold over the double's score leaves nothing, looked at or not
     above_all = Pipeline(model, PipelineConfig(view=ONE_BAND)).detect(data, camera, min_score=0.6)

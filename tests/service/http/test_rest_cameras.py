@@ -130,7 +130,8 @@ def test_a_planned_model_reports_each_camera_view(settings_for: Callable[..., Se
         view = httpx.get(f"{live.url}/v1/cameras/demo").json()["view"]
         points = httpx.get(f"{live.url}/v1/model").json()["view_operating_points"]
         assert view["layout"] == "1band+nadir+look" and view["operating_point"] == points["1band+nadir+look"]
-        assert view["second_look"] == {"max_patches": 12, "zoom": 2.0, "patch_px": [96, 256],
+        assert view["second_look"] == {"max_patches": 12, "zoom": 2.0, "target_rows": 48.0, "max_zoom": 4.0,
+                                       "patch_px": [96, 256],
                                        "max_pixels": 786_432, "source": "server",
                                        "max_cost_ratio": round(786_432 / (1792 * 416), 3)}
         assert view["input_wh"] == [1792, 416]
