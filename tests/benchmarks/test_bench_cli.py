@@ -70,6 +70,19 @@ def test_cpu_model_name_from_cpuinfo() -> None:
     assert cpu_model_name("Hardware\t: BCM2835\n") == "BCM2835"
 
 
+def _recorded_runs(monkeypatch: pytest.MonkeyPatch, model: Any, method: str) -> list[tuple[int, ...]]:
+    """The input shapes of every call of `model`'s `method` (`run` or `run_boxes`) from now on."""
+    shapes: list[tuple[int, ...]] = []
+    call = getattr(model, method)
+
+    def recorded(image: Any) -> Any:
+        shapes.append(image.shape)
+        return call(image)
+
+    monkeypatch.setattr(model, method, recorded)
+    return shapes
+
+
 def test_the_staged_and_naive_paths_see_the_view_the_service_plans(monkeypatch: pytest.MonkeyPatch) -> None:
     # With a budget that has room for the nadir view, the stage-by-stage timing and the naive
     # pipeline run it too, and find what `Pipeline.detect` finds.
@@ -87,17 +100,35 @@ def test_the_staged_and_naive_paths_see_the_view_the_service_plans(monkeypatch: 
     plan = pipeline.plan(frame_camera)
     assert plan is not None and plan.nadir is not None and len(images) == 2
     threshold = pipeline.info.default_min_score
-    nadir_runs: list[tuple[int, ...]] = []
-    run_boxes = pipeline.model.run_boxes
-
-    def counted(image: np.ndarray) -> Any:
-        nadir_runs.append(image.shape)
-        return run_boxes(image)
-
-    monkeypatch.setattr(pipeline.model, "run_boxes", counted)
+    nadir_runs = _recorded_runs(monkeypatch, pipeline.model, "run_boxes")
     _, staged = staged_detect(pipeline, data, camera, threshold)
     assert nadir_runs == [(plan.nadir.side, plan.nadir.side, 3)]  # the stages ran the nadir view
     served = pipeline.detect(data, camera, min_score=threshold).detections
     np.testing.assert_allclose(staged.cxcywh, served.cxcywh, atol=1e-6)
     naive = NaivePipeline(DEFAULT_MODEL_PATH, pipeline, camera).detect(data, threshold)
     assert len(naive.scores) >= len(served.scores) - 1  # full decode, box-side feet: nearly the same people
+
+
+def test_the_staged_path_runs_the_second_look_as_the_service_does(monkeypatch: pytest.MonkeyPatch) -> None:
+    # With the look on, the stage-by-stage timing runs the patches' canvas as `Pipeline.detect` does
+    # (the same runs of the model, the same people) and counts it as inference.
+    import numpy as np
+
+    from benchmarks.inprocess import service_pipeline, staged_detect
+    from fisheye import load_camera
+    from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
+
+    monkeypatch.setenv("FISHLOC_SECOND_LOOK", "786432")
+    pipeline = service_pipeline(DEFAULT_MODEL_PATH, 1)
+    camera = load_camera(DEMO_CAMERA_PATH)
+    data = (Path(__file__).resolve().parents[2] / "samples" / "000001.jpg").read_bytes()
+    plan = pipeline.plan(camera.scaled_to((2048, 2048)))  # the sample frame's size
+    assert plan is not None and plan.layout.endswith("+look")
+    threshold = pipeline.point(plan.layout).min_score
+    runs = _recorded_runs(monkeypatch, pipeline.model, "run")
+    times, staged = staged_detect(pipeline, data, camera, threshold)
+    staged_runs, runs[:] = list(runs), []
+    served = pipeline.detect(data, camera, min_score=threshold).detections
+    assert len(staged_runs) == 2 and staged_runs == runs  # the strip, then the patches' canvas
+    np.testing.assert_allclose(staged.cxcywh, served.cxcywh, atol=1e-6)
+    assert times["postprocess"] == 0.0 and times["inference"] > 0
