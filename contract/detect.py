@@ -155,6 +155,24 @@ def select_looking(model: ContractModel, raw: RawOutputs, mapping: InputMapping,
                  min_score)
 
 
+def look_input(info: ModelInfo, image: NDArray[np.uint8], scale_xy: tuple[float, float],
+               mapping: InputMapping, first: FrameDetections
+               ) -> tuple[list[look.Patch], look.Canvas, NDArray[np.uint8]] | None:
+    """The second look's one model input for a frame seen through `mapping`: the patches about the
+    first look's detections (`first`, from `look.FIRST_LOOK_FLOOR` on) that fit its budget, their
+    canvas, and the canvas image, unwrapped from `image` (the decoded frame, `scale_xy` of the
+    frame's size) with `info`'s pad value; None where the view has no look or no detection gets a
+    patch."""
+    if not looks_again(mapping):
+        return None
+    patches = look.plan_patches(mapping.plan, first.boxes_cxcywh, first.scores, first.principal_point)
+    if not patches:
+        return None
+    patches, canvas = look.fit(patches, mapping.plan.second_look_pixels)
+    inputs = [patch.grid.unwrap(image, scale_xy, border_value=info.pad_value) for patch in patches]
+    return patches, canvas, canvas.paste(inputs, info.pad_value)
+
+
 def second_look(model: ContractModel, image: NDArray[np.uint8], scale_xy: tuple[float, float],
                 mapping: InputMapping, first: FrameDetections, nms_iou: float | None,
                 max_detections: int = 300) -> FrameDetections:
@@ -163,19 +181,16 @@ def second_look(model: ContractModel, image: NDArray[np.uint8], scale_xy: tuple[
     through `model`, unwrapped from `image` (the decoded frame, `scale_xy` of the frame's size), its
     people read back to frame px and kept where `look.patch_keeps` and `look.parts_of` allow; then
     the rotated NMS again. A view without the second look returns `first` as it is."""
-    if not looks_again(mapping):
+    looking = look_input(model.info, image, scale_xy, mapping, first)
+    if looking is None:
         return first
+    patches, canvas, canvas_image = looking
     pp = first.principal_point
-    patches = look.plan_patches(mapping.plan, first.boxes_cxcywh, first.scores, pp)
-    if not patches:
-        return first
-    patches, canvas = look.fit(patches, mapping.plan.second_look_pixels)
     looked = {patch.detection for patch in patches}
     others = first.boxes_cxcywh[[i for i in range(len(first.scores)) if i not in looked]]
     boxes, scores = [first.boxes_cxcywh], [first.scores]
     feet: list[FloatArray | None] = [first.foot_px]
-    inputs = [patch.grid.unwrap(image, scale_xy, border_value=model.info.pad_value) for patch in patches]
-    raws = canvas.split(model.run(canvas.paste(inputs, model.info.pad_value)))
+    raws = canvas.split(model.run(canvas_image))
     for patch, raw in zip(patches, raws, strict=True):
         # The strip's own NMS is the patch's: one band's piece has no overlap columns for the
         # rotated one to merge, and that runs over every look's people below.

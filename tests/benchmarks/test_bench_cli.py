@@ -114,7 +114,7 @@ def test_the_staged_path_runs_the_second_look_as_the_service_does(monkeypatch: p
     # (the same runs of the model, the same people) and counts it as inference.
     import numpy as np
 
-    from benchmarks.inprocess import service_pipeline, staged_detect
+    from benchmarks.inprocess import look_canvas, service_pipeline, staged_detect
     from fisheye import load_camera
     from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
 
@@ -132,3 +132,8 @@ def test_the_staged_path_runs_the_second_look_as_the_service_does(monkeypatch: p
     assert len(staged_runs) == 2 and staged_runs == runs  # the strip, then the patches' canvas
     np.testing.assert_allclose(staged.cxcywh, served.cxcywh, atol=1e-6)
     assert times["postprocess"] == 0.0 and times["inference"] > 0
+    # the floor times the same canvas beside the view's inputs; a view without the look has none
+    canvas = look_canvas(pipeline, data, camera)
+    assert canvas is not None and canvas.shape == runs[1]
+    monkeypatch.setenv("FISHLOC_SECOND_LOOK", "0")
+    assert look_canvas(service_pipeline(DEFAULT_MODEL_PATH, 1), data, camera) is None
