@@ -209,11 +209,14 @@ def second_look(model: ContractModel, image: NDArray[np.uint8], scale_xy: tuple[
     if all_feet is not None and first.foot_px is not None:
         # A patch's person whom the first look found too stands where the first look put them: the
         # foot branch was trained at the bands' scales, not at the patches' twice that.
+        # The first look's own detections keep their feet: only a patch's people are matched.
         kept_feet = all_feet[kept]
-        overlap = rotated_iou(all_boxes[kept], first.boxes_cxcywh, pp)
-        best = overlap.argmax(axis=1)
-        same = overlap[np.arange(len(kept)), best] >= look.SAME_PERSON_IOU
-        kept_feet[same] = first.foot_px[best[same]]
+        from_patch = np.flatnonzero(kept >= len(first.scores))
+        if len(from_patch):
+            overlap = rotated_iou(all_boxes[kept[from_patch]], first.boxes_cxcywh, pp)
+            best = overlap.argmax(axis=1)
+            same = overlap[np.arange(len(from_patch)), best] >= look.SAME_PERSON_IOU
+            kept_feet[from_patch[same]] = first.foot_px[best[same]]
     return dataclasses.replace(first, boxes_cxcywh=all_boxes[kept], scores=all_scores[kept],
                                foot_px=kept_feet)
 
