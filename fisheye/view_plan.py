@@ -305,8 +305,7 @@ class ViewPlan:
             "second_look": None if not self.second_look_patches else {
                 "max_patches": self.second_look_patches, "zoom": self.second_look_zoom,
                 "target_rows": self.second_look_target_rows,
-                "max_zoom": max(self.second_look_zoom, SECOND_LOOK_MAX_ZOOM) if self.second_look_target_rows
-                else self.second_look_zoom,
+                "max_zoom": SECOND_LOOK_MAX_ZOOM if self.second_look_target_rows else self.second_look_zoom,
                 "patch_px": list(SECOND_LOOK_PATCH_PX), "max_pixels": self.second_look_pixels,
                 "max_cost_ratio": round(self.second_look_pixels / self.reference_pixels, 3)},
             "notes": list(self.notes),

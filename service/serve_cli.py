@@ -60,7 +60,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "camera's record sets its own (max_view_pixels)")
     parser.add_argument("--second-look", type=int, metavar="PIXELS",
                         help="the second look: a frame's small, uncertain detections seen again at twice "
-                             "their band's scale, in one input of its patches of at most this many px (a "
+                             "their band's scale (a far one more, to 48 rows, 4x at most), in one input of "
+                             "its patches of at most this many px (a "
                              "planned model only; env FISHLOC_SECOND_LOOK; default 0: none; 786432: "
                              "12 patches' px at their largest; 1.2-1.8x the time of a frame without it)")
     parser.add_argument("--max-camera-view-pixels", type=int, metavar="PIXELS",
