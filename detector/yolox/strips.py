@@ -284,19 +284,29 @@ class StripSample:
                              f"feet {self.feet.shape}")
 
 
+# The strips a dataset caches take at most this many bytes; beyond, a strip is unwrapped each time it
+# is drawn. A full turn at 3x the served rows and columns is ~19 MB (1248 x 4992 px): without a bound,
+# band scales up to the second look's (`--band-scale 1 2 3`) on 1500 frames outgrow a 24 GiB machine.
+STRIP_CACHE_BYTES = 10 * 2 ** 30
+
+
 class PolarStripDataset:
     """Annotated frames -> augmented StripSamples for a PolarDetectorConfig; `set_epoch` first."""
 
     def __init__(self, frames: Sequence[FrameAnnotations], config: PolarDetectorConfig,
-                 augment: StripAugment | None = None, seed: int = 0, cache: bool = True) -> None:
+                 augment: StripAugment | None = None, seed: int = 0, cache: bool = True,
+                 cache_bytes: int = STRIP_CACHE_BYTES) -> None:
         self.frames = list(frames)
         self.config = config
         self.info = training_info(config)
         self.augment = augment if augment is not None else StripAugment()
         self.seed = seed
         self.cache = cache
+        self.cache_bytes = cache_bytes
+        self.cached_bytes = 0
         self.epoch = 0
         self._strips: dict[tuple[int, float, float], tuple[NDArray[np.uint8], FloatArray, FloatArray]] = {}
+        self._counted: set[tuple[int, float, float]] = set()
         self.full_turns_left_out = 0
 
     def set_epoch(self, epoch: int) -> None:
@@ -311,16 +321,21 @@ class PolarStripDataset:
 
     def base(self, index: int, radius_scale: float = 1.0, band_scale: float = 1.0
              ) -> tuple[NDArray[np.uint8], FloatArray, FloatArray]:
-        """The frame's full-turn strip, labels and feet (strip px), cached when `cache`."""
+        """The frame's full-turn strip, labels and feet (strip px), cached when `cache` while the
+        cache holds under `cache_bytes`."""
         key = (index, radius_scale, band_scale)
         if key in self._strips:
             return self._strips[key]
         strip, xyxy, feet, full_turns = frame_strip(self.frames[index], self.info, radius_scale, band_scale,
                                                     self.augment.unwrap_samples)
-        if full_turns:
-            log.info("%s: %d people over the principal point left out", self.frames[index].path, full_turns)
-        if self.cache:
+        if key not in self._counted:  # each strip's labels counted once, cached or not
+            self._counted.add(key)
             self.full_turns_left_out += full_turns
+            if full_turns:
+                log.info("%s: %d people over the principal point left out", self.frames[index].path,
+                         full_turns)
+        if self.cache and self.cached_bytes + strip.nbytes <= self.cache_bytes:
+            self.cached_bytes += strip.nbytes
             self._strips[key] = (strip, xyxy, feet)
         return strip, xyxy, feet
 

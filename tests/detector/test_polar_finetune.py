@@ -141,6 +141,27 @@ def test_a_band_scale_strip_is_the_band_of_a_planned_view(toy_dataset: Callable[
         StripAugment(band_scales=(0.5,))
 
 
+def test_the_strip_cache_stops_at_its_bound_with_the_same_samples(toy_dataset: Callable[..., Path]) -> None:
+    # strips at the second look's scales are large: past `cache_bytes` a strip is unwrapped each
+    # time it is drawn, the same samples either way, and its labels are counted once
+    frames = read_dataset(toy_dataset(count=3, size=128, people=4))
+    augment = StripAugment(band_scales=(1.0, 2.0), flip=0.0)
+    unbounded = PolarStripDataset(frames, CONFIG, augment, seed=2)
+    one_strip = frame_strip(frames[0], training_info(CONFIG))[0].nbytes
+    bounded = PolarStripDataset(frames, CONFIG, augment, seed=2, cache_bytes=one_strip)
+    for epoch in range(3):
+        for dataset in (unbounded, bounded):
+            dataset.set_epoch(epoch)
+        for index in range(len(frames)):
+            a, b = unbounded[index], bounded[index]
+            np.testing.assert_array_equal(a.image, b.image)
+            np.testing.assert_array_equal(a.labels_xyxy, b.labels_xyxy)
+            np.testing.assert_array_equal(a.feet, b.feet)
+    assert len(unbounded._strips) > 1 and unbounded.cached_bytes > one_strip
+    assert len(bounded._strips) == 1 and bounded.cached_bytes == one_strip
+    assert bounded.full_turns_left_out == unbounded.full_turns_left_out
+
+
 def test_an_averaged_strip_is_the_view_of_as_many_samples(toy_dataset: Callable[..., Path]) -> None:
     # `StripAugment.unwrap_samples`: the same strip and labels, each px the mean of its 2 x 2
     # samples, as the service's view of `ViewPlanConfig.unwrap_samples` 2 makes it
