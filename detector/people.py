@@ -40,7 +40,8 @@ RINGS = {"nadir": (0.0, NADIR_FRACTION), "middle": (NADIR_FRACTION, 0.7), "rim":
 class PersonOutcome:
     """One annotated person: `frame` (the frame's name), `person` (its index there), `outcome` (one
     of OUTCOMES), the box centre's radius in px and as a fraction of the image circle's
-    (`radius_fraction`, NaN without a camera), `distance_m` from the nadir (NaN when unknown), the
+    (`radius_fraction`, NaN without a camera), the centre itself (`x_px`, `y_px`, frame px, to find
+    them in the frame), `distance_m` from the nadir (NaN when unknown), the
     radius-aligned box `along_px` × `across_px` (along the ray, across it), and the detection of
     highest IoU with them among those AP counts: `best_iou`, its `best_score`, its box
     `det_along_px` × `det_across_px` (NaN when the frame has no detection)."""
@@ -50,6 +51,8 @@ class PersonOutcome:
     outcome: str
     radius_px: float
     radius_fraction: float
+    x_px: float
+    y_px: float
     distance_m: float
     along_px: float
     across_px: float
@@ -63,8 +66,8 @@ class PersonOutcome:
 class FalsePositive:
     """One detection at or above the threshold that matches nobody: `frame`, its `rank` by score in
     the frame, `kind` (one of FALSE_POSITIVES), `score`, the box centre's radius in px and as a
-    fraction of the image circle's, its box `along_px` × `across_px`, and its highest IoU with any
-    person (`best_iou`)."""
+    fraction of the image circle's, the centre itself (`x_px`, `y_px`, frame px), its box `along_px`
+    × `across_px`, and its highest IoU with any person (`best_iou`)."""
 
     frame: str
     rank: int
@@ -72,6 +75,8 @@ class FalsePositive:
     score: float
     radius_px: float
     radius_fraction: float
+    x_px: float
+    y_px: float
     along_px: float
     across_px: float
     best_iou: float
@@ -121,7 +126,8 @@ def _outcomes(frame: EvalFrame, name: str, iou: np.ndarray, found: np.ndarray, s
         det = boxes[best] if best >= 0 else np.full(4, np.nan)
         rows.append(PersonOutcome(
             frame=name, person=g, outcome=outcome, radius_px=float(radius_px[g]),
-            radius_fraction=float(radius_px[g] / circle_px), distance_m=float(frame.gt_distances_m[g]),
+            radius_fraction=float(radius_px[g] / circle_px), x_px=float(frame.gt_boxes[g, 0]),
+            y_px=float(frame.gt_boxes[g, 1]), distance_m=float(frame.gt_distances_m[g]),
             along_px=float(frame.gt_boxes[g, 3]), across_px=float(frame.gt_boxes[g, 2]),
             best_iou=best_iou, best_score=float(scores[best]) if best >= 0 else float("nan"),
             det_along_px=float(det[3]), det_across_px=float(det[2])))
@@ -144,7 +150,8 @@ def _false_positives(frame: EvalFrame, name: str, iou: np.ndarray, false: np.nda
             kind = BACKGROUND
         rows.append(FalsePositive(
             frame=name, rank=int(d), kind=kind, score=float(scores[d]), radius_px=float(radius_px[d]),
-            radius_fraction=float(radius_px[d] / circle_px), along_px=float(boxes[d, 3]),
+            radius_fraction=float(radius_px[d] / circle_px), x_px=float(boxes[d, 0]), y_px=float(boxes[d, 1]),
+            along_px=float(boxes[d, 3]),
             across_px=float(boxes[d, 2]), best_iou=best_iou))
     return rows
 

@@ -70,6 +70,7 @@ def test_each_outcome_by_hand() -> None:
     assert rows[2].best_score == pytest.approx(0.8) and rows[2].det_along_px == pytest.approx(100.0)
     assert rows[1].radius_px == pytest.approx(140.0)
     assert rows[1].radius_fraction == pytest.approx(140.0 / CAMERA.image_circle_radius_px())
+    assert (rows[1].x_px, rows[1].y_px) == (RIGHT[0], RIGHT[1])  # where to find them in the frame
     assert (rows[0].along_px, rows[0].across_px) == (40.0, 20.0)
     assert rows[3].best_iou == 0.0
     # the threshold given overrides the frame's own: at 0.2, RIGHT is found too
@@ -94,6 +95,7 @@ def test_each_kind_of_false_positive_by_hand() -> None:
     assert errors[0].best_iou == pytest.approx(1.0) and errors[1].best_iou == pytest.approx(0.4, abs=1e-6)
     assert errors[2].best_iou == 0.0 and errors[2].score == pytest.approx(0.6)
     assert errors[1].along_px == pytest.approx(100.0) and errors[1].radius_px == pytest.approx(140.0)
+    assert (errors[2].x_px, errors[2].y_px) == (LEFT[0], LEFT[1])
     # at 0.1 the box below the lens counts too; at 0.95 nothing does
     assert [e.kind for e in frame_false_positives(frame, "f", min_score=0.1)][-1] == BACKGROUND
     assert frame_false_positives(frame, "f", min_score=0.95) == []
