@@ -36,8 +36,7 @@ from benchmarks.frames import FrameSet
 from benchmarks.stats import Summary, overhead_pct, ratio, summarize
 from contract import InputMapping, RawOutputs, merge_outputs, min_decoded_side, run_view, view_inputs
 from contract import second_look as look
-from contract.detect import look_input, looks_again, select_detections
-from contract.views import mapping_layout
+from contract.detect import look_input, looks_again
 from fisheye import FisheyeCamera
 from service.core.config import Settings
 from service.core.metrics import ServiceMetrics
@@ -68,8 +67,7 @@ def staged_detect(pipeline: Pipeline, data: bytes, camera: FisheyeCamera,
     if looks_again(mapping):
         # the second look's patches run on the model too: their time is inference, as the service
         # counts it (`Pipeline.detect`'s timing)
-        scale = (frame.rgb.shape[1] / header.size_wh[0], frame.rgb.shape[0] / header.size_wh[1])
-        kept = pipeline.select(raw, mapping, threshold, frame_camera, frame.rgb, scale)
+        kept = pipeline.select(raw, mapping, threshold, frame_camera, frame.rgb, frame.scale_xy)
         inferred = selected = time.perf_counter()
     else:
         inferred = time.perf_counter()
@@ -95,11 +93,10 @@ def look_canvas(pipeline: Pipeline, data: bytes, camera: FisheyeCamera) -> NDArr
     images, mapping = view_inputs(pipeline.info, frame.rgb, frame_camera, pipeline.config.view)
     if not looks_again(mapping):
         return None
-    pp = (float(frame_camera.principal_point[0]), float(frame_camera.principal_point[1]))
-    first = select_detections(run_view(pipeline.model, images, mapping), mapping, pp, look.FIRST_LOOK_FLOOR,
-                              pipeline.point(mapping_layout(mapping)).nms_iou, pipeline.config.max_detections)
-    scale = (frame.rgb.shape[1] / header.size_wh[0], frame.rgb.shape[0] / header.size_wh[1])
-    found = look_input(pipeline.info, frame.rgb, scale, mapping, first)
+    # the first look's detections from the look's floor, as `select_looking` takes them
+    raw = run_view(pipeline.model, images, mapping)
+    first = pipeline.select(raw, mapping, look.FIRST_LOOK_FLOOR, frame_camera)
+    found = look_input(pipeline.info, frame.rgb, frame.scale_xy, mapping, first)
     return None if found is None else found[2]
 
 

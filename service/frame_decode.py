@@ -71,6 +71,11 @@ class DecodedFrame:
     def decoded_wh(self) -> tuple[int, int]:
         return int(self.rgb.shape[1]), int(self.rgb.shape[0])
 
+    @property
+    def scale_xy(self) -> tuple[float, float]:
+        """The decoded px per frame px, x and y (what the second look samples its patches at)."""
+        return self.rgb.shape[1] / self.frame_wh[0], self.rgb.shape[0] / self.frame_wh[1]
+
 
 def _jpeg_size(data: bytes) -> tuple[int, int]:
     position = 2

@@ -155,8 +155,7 @@ class Pipeline:
         threshold = self.point(mapping_layout(mapping)).min_score if min_score is None else float(min_score)
         if looks_again(mapping):
             # the second look's patches run on the model too: their time counts as inference
-            scale = (frame.rgb.shape[1] / header.size_wh[0], frame.rgb.shape[0] / header.size_wh[1])
-            kept = self.select(raw, mapping, threshold, frame_camera, frame.rgb, scale)
+            kept = self.select(raw, mapping, threshold, frame_camera, frame.rgb, frame.scale_xy)
             inferred = time.perf_counter()
         else:
             inferred = time.perf_counter()

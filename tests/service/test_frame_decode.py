@@ -67,6 +67,7 @@ def test_reduced_decode_matches_area_downscale() -> None:
     data = bytes(cv2.imencode(".jpg", big, [cv2.IMWRITE_JPEG_QUALITY, 100])[1].tobytes())
     frame = decode_frame(data, input_size=64, max_pixels=10**7)
     assert frame.reduction == 8 and frame.decoded_wh == (64, 64) and frame.frame_wh == (512, 512)
+    assert frame.scale_xy == (1 / 8, 1 / 8)  # decoded px per frame px, what the second look samples at
     rgb_small = cv2.cvtColor(small, cv2.COLOR_BGR2RGB).astype(np.int16)
     assert np.abs(frame.rgb.astype(np.int16) - rgb_small).mean() < 4  # JPEG noise only
 
