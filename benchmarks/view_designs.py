@@ -86,6 +86,13 @@ DESIGNS: dict[str, ViewPlanConfig] = {
        for patches, zoom in ((6, 2.0), (24, 2.0), (12, 1.5), (12, 2.5))},
     "two bands 1.0x / 1.5x + nadir view + second look": dataclasses.replace(
         DEFAULT_VIEW, max_pixels=4_000_000, second_look_pixels=SECOND_LOOK_FULL_PIXELS),
+    # after 0.8.0: budgets under the default's 892 928 px, where the strip at the trained scale and
+    # the nadir view do not both fit: the nadir view left out (the rule), or kept beside a strip
+    # shrunk to leave it its px (`ViewPlanConfig.nadir_min_scale`)
+    **{f"budget {budget // 1000}k, {way}": dataclasses.replace(
+        DEFAULT_VIEW, max_pixels=budget, nadir_min_scale=keep)
+       for budget in (800_000, 700_000, 600_000, 450_000, 350_000)
+       for way, keep in (("no nadir view (the rule)", None), ("nadir view beside a smaller strip", 0.5))},
 }
 FIGURES = ("AP50", "precision", "recall", "AP_far", "recall_nadir", "mPE", "mPE_reported")
 

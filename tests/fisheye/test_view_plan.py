@@ -168,7 +168,8 @@ def test_a_budget_below_any_view_is_refused() -> None:
                                     {"target_along_px": 0.0}, {"person_height_m": 4.0},
                                     {"min_outer_fraction": 0.0}, {"min_outer_fraction": 1.0},
                                     {"outer_row_scale": 0.5}, {"outer_row_scale": 2.0},
-                                    {"unwrap_samples": 0}, {"unwrap_samples": 5}])
+                                    {"unwrap_samples": 0}, {"unwrap_samples": 5},
+                                    {"nadir_min_scale": 0.0}, {"nadir_min_scale": 1.5}])
 def test_config_refuses_nonsense(kwargs: dict[str, object]) -> None:
     with pytest.raises(ValueError):
         ViewPlanConfig(**kwargs)  # type: ignore[arg-type]
@@ -201,6 +202,28 @@ def test_a_budget_without_room_for_the_nadir_view_says_so() -> None:
     assert any("no nadir view (384 x 384 px more)" in note for note in plan.notes)
     off = plan_view(DEMO, config=ViewPlanConfig(max_pixels=4_000_000, nadir_fraction=None))
     assert off.nadir is None and not any("nadir" in note for note in off.notes)
+
+
+def test_the_nadir_view_may_be_kept_beside_a_smaller_strip() -> None:
+    budget = 800_000
+    kept = plan_view(DEMO, config=ViewPlanConfig(max_pixels=budget, nadir_min_scale=0.8))
+    assert kept.nadir is not None and kept.layout == "1band+nadir" and kept.pixels <= budget
+    (band,) = kept.bands
+    assert 0.8 <= band.scale < 1.0  # the strip gave up its px, not the nadir view
+    assert kept.pixels == kept.canvas_wh[0] * kept.canvas_wh[1] + 384 * 384
+    assert kept.nadir.column == kept.canvas_wh[0] + 32  # beside the smaller canvas
+    assert any(f"budget {budget} px binds: one band at scale" in note
+               and "nadir view (384 x 384 px) kept" in note for note in kept.notes)
+    # a strip that would have to shrink further than the config allows leaves the nadir view out
+    strict = plan_view(DEMO, config=ViewPlanConfig(max_pixels=budget, nadir_min_scale=0.95))
+    assert strict.nadir is None and strict.bands[0].scale == 1.0
+    assert any("no nadir view" in note for note in strict.notes)
+    # and so does one that would lose a band: two bands without the nadir view, not one with it
+    whole = plan_view(DEMO, config=LARGE)
+    short = plan_view(DEMO, config=ViewPlanConfig(max_pixels=whole.wanted_pixels - 1, nadir_min_scale=0.5))
+    assert short.layout == "2band" and short.nadir is None
+    # where both fit, the config changes nothing
+    assert plan_view(DEMO, config=ViewPlanConfig(nadir_min_scale=0.5)) == plan_view(DEMO)
 
 
 @pytest.mark.parametrize("kwargs", [{"nadir_fraction": 0.4, "nadir_view_fraction": 0.35},
