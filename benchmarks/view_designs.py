@@ -15,6 +15,12 @@ With `--choose VAL` each design runs at its own operating point, the best F1 on 
 renders (`fishloc eval --operating-point`), rather than the one the model stores for its layout: a
 view unlike the ones the points were chosen on gets a fair threshold.
 
+With `--scale-jitter 0.9 0.95 1.05 1.1` each set is read again with each design's bands and nadir
+view at those factors of their scales, at the same point, and AP50's mean, min and max over the
+scales (1 among them) join the figures: on a few real frames AP50 at one scale is one draw of how
+large their people come out in the input, and it swings by 0.1-0.2 from one scale to the next
+(docs/DETECTOR.md, "Real frames read at several scales").
+
 The model must be a planned one (`fishloc export --planned`): the fixed strip is its one-band plan.
 """
 
@@ -23,6 +29,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -135,12 +142,35 @@ def chosen_point(model: ContractModel, frames: Sequence[Any], view: ViewPlanConf
     return OperatingPoint(best.min_score, best.nms_iou)
 
 
+def scaled_view(view: ViewPlanConfig, factor: float) -> ViewPlanConfig:
+    """`view` with its bands and its nadir view read `factor` times as large (every person that
+    much larger in the input), its budget grown by factor² and a fifth more for the stride's
+    rounding, so that the same layout is planned at the larger scales."""
+    return dataclasses.replace(
+        view, scales=tuple(scale * factor for scale in view.scales), nadir_scale=view.nadir_scale * factor,
+        outer_row_scale=None if view.outer_row_scale is None else view.outer_row_scale * factor,
+        max_pixels=math.ceil(view.max_pixels * factor ** 2 * (1.2 if factor != 1 else 1.0)))
+
+
 def design_figures(design: str, model: ContractModel, view: ViewPlanConfig, sets: dict[str, list[Any]],
-                   choose_on: Sequence[Any] | None) -> dict[str, dict[str, Any]]:
+                   choose_on: Sequence[Any] | None, jitter: Sequence[float] = ()
+                   ) -> dict[str, dict[str, Any]]:
     """`evaluate_design` on every set, at the point chosen on `choose_on` (None: the model's own for
-    each layout); the figures also go to stderr as one JSON line as soon as they are made."""
+    each layout); the figures also go to stderr as one JSON line as soon as they are made. With
+    `jitter`, each set is read again at each of those scale factors (`scaled_view`) at the same
+    point, and its figures gain `AP50_by_scale` (factor 1 among them) and their mean."""
     point = None if choose_on is None else chosen_point(model, choose_on, view)
     figures = {name: evaluate_design(model, view, frames, point) for name, frames in sets.items()}
+    for factor in jitter:
+        scaled = scaled_view(view, factor)
+        for name, frames in sets.items():
+            by_scale = figures[name].setdefault("AP50_by_scale", {"1": figures[name]["AP50"]})
+            by_scale[f"{factor:g}"] = evaluate_design(model, scaled, frames, point)["AP50"]
+    for by_set in figures.values():
+        if "AP50_by_scale" in by_set:
+            values = list(by_set["AP50_by_scale"].values())
+            by_set["AP50_over_scales"] = {"mean": sum(values) / len(values), "min": min(values),
+                                          "max": max(values)}
     print(json.dumps({design: figures}), file=sys.stderr, flush=True)
     return figures
 
@@ -156,12 +186,20 @@ def cell(value: Any) -> str:
     return "–" if value is None or value != value else f"{value:.3f}"
 
 
+def over_scales(summary: dict[str, float] | None) -> str:
+    return "–" if summary is None else (
+        f"{cell(summary['mean'])} [{cell(summary['min'])}, {cell(summary['max'])}]")
+
+
 def markdown_table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
     """Designs as rows (with the operating point each was chosen, where it was); per set AP50 /
     precision (and AP_far, recall_nadir, mPE where the set has floor positions), and the cost
     ratio of the first set's plans."""
     sets = list(next(iter(results.values())))
     header = ["design", *[f"{s} AP50 / P" for s in sets], "renders AP_far / recall_nadir / mPE", "cost"]
+    jittered = any("AP50_over_scales" in by_set[s] for by_set in results.values() for s in sets)
+    if jittered:
+        header += [f"{s} AP50 over scales: mean [min, max]" for s in sets]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for design, by_set in results.items():
         first = by_set[sets[0]]
@@ -172,6 +210,8 @@ def markdown_table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
         extra = by_set[rendered[-1]] if rendered else {}
         cells.append(" / ".join(cell(extra.get(k)) for k in ("AP_far", "recall_nadir", "mPE")))
         cells.append(f"{by_set[sets[0]]['cost_ratio']:.2f}x")
+        if jittered:
+            cells += [over_scales(by_set[s].get("AP50_over_scales")) for s in sets]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -188,6 +228,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="validation renders on which each design gets its own operating point "
                              "(best F1 over the NMS grid, `fishloc eval --operating-point`); default: "
                              "the model's stored point for each view's layout")
+    parser.add_argument("--scale-jitter", type=float, nargs="+", default=(), metavar="FACTOR",
+                        help="also read every set with each design's bands and nadir view at these "
+                             "factors of their scales (e.g. 0.9 0.95 1.05 1.1), at the same operating "
+                             "point, and report AP50's mean, min and max over them and 1: a few real "
+                             "frames' AP50 at one scale is one draw of how large their people come out")
     parser.add_argument("--threads", type=int, default=2, help="inference threads (default 2)")
     parser.add_argument("--json", type=Path, default=None, help="where to write every figure")
     args = parser.parse_args(argv)
@@ -199,6 +244,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise ModelError(f"{args.model} is not a planned model (fishloc export --planned)")
         choose_on = None if args.choose is None else read_dataset(args.choose)[:args.limit]
         sets = read_sets(args.data, args.limit)
+        if any(not 0.5 <= factor <= 2 or factor == 1 for factor in args.scale_jitter):
+            raise ValueError(f"--scale-jitter factors must lie in [0.5, 2] and differ from 1, got "
+                             f"{args.scale_jitter}")
     except (ModelError, DatasetFormatError, ValueError) as error:
         print(f"view_designs: {error}", file=sys.stderr)
         return 2
@@ -206,7 +254,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for design, view in DESIGNS.items():
         if args.design is not None and design not in args.design:
             continue
-        results[design] = design_figures(design, model, view, sets, choose_on)
+        results[design] = design_figures(design, model, view, sets, choose_on, args.scale_jitter)
     report(results, args.json)
     return 0
 

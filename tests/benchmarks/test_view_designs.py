@@ -12,7 +12,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "contract"))
 
 from polar_double import save_polar_double
 
-from benchmarks.view_designs import DESIGNS, main, markdown_table
+from benchmarks.view_designs import DESIGNS, evaluate_design, main, markdown_table, scaled_view
+from fisheye import load_camera
+from fisheye.view_plan import plan_view
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -52,6 +54,51 @@ def test_each_design_at_its_own_point_chosen_on_validation_frames(tmp_path: Path
                                   view=DESIGNS[design])[0]
     assert (figures["min_score"], figures["nms_iou"]) == (best.min_score, best.nms_iou)
     assert f"{design} (at {best.min_score:g} / NMS {best.nms_iou:g})" in capsys.readouterr().out
+
+
+def test_a_scaled_view_plans_the_same_layout_with_every_person_larger() -> None:
+    camera = load_camera(ROOT / "models" / "demo_camera.yaml")
+    view = DESIGNS["strip + nadir view 0.35 at 1.25x"]
+    assert scaled_view(view, 1.0) == view
+    plain = plan_view(camera, config=view)
+    for factor in (0.9, 1.1):
+        scaled = plan_view(camera, config=scaled_view(view, factor))
+        assert scaled.layout == plain.layout == "1band+nadir"
+        assert [b.scale for b in scaled.bands] == pytest.approx([b.scale * factor for b in plain.bands])
+        assert scaled.nadir is not None and plain.nadir is not None
+        assert scaled.nadir.half_px == plain.nadir.half_px  # the same disc, read at another size
+        assert (scaled.nadir.side > plain.nadir.side) == (factor > 1)
+    # two bands keep their two bands, each scaled
+    bands = DESIGNS["two bands 1.0x / 1.5x, margin 0.6"]
+    wide = plan_view(camera, config=scaled_view(bands, 1.1))
+    assert [b.scale for b in wide.bands] == pytest.approx([1.1, 1.65])
+
+
+def test_scale_jitter_reads_every_set_again_at_each_factor(tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    from contract import OnnxModel, SessionThreads
+    from detector.data.readers import read_dataset
+
+    model = save_polar_double(tmp_path / "planned.onnx", planned=True)
+    out = tmp_path / "designs.json"
+    samples = ROOT / "samples" / "annotations.json"
+    design = "strip + nadir view 0.35 at 1.25x"
+    assert main(["--model", str(model), "--data", f"samples={samples}", "--design", design, "--limit", "2",
+                 "--threads", "1", "--scale-jitter", "0.9", "1.1", "--json", str(out)]) == 0
+    figures = json.loads(out.read_text())[design]["samples"]
+    by_scale = figures["AP50_by_scale"]
+    assert list(by_scale) == ["1", "0.9", "1.1"] and by_scale["1"] == figures["AP50"]
+    onnx = OnnxModel(model, SessionThreads(intra_op=1))
+    frames = read_dataset(samples)[:2]
+    assert by_scale["0.9"] == evaluate_design(onnx, scaled_view(DESIGNS[design], 0.9), frames)["AP50"]
+    summary = figures["AP50_over_scales"]
+    assert summary["min"] == min(by_scale.values()) and summary["max"] == max(by_scale.values())
+    assert summary["mean"] == pytest.approx(sum(by_scale.values()) / 3)
+    assert "samples AP50 over scales: mean [min, max]" in capsys.readouterr().out
+    # a factor of 1 (always read) or outside [0.5, 2] is refused
+    for bad in ("1", "3"):
+        assert main(["--model", str(model), "--data", f"samples={samples}", "--scale-jitter", bad]) == 2
+    assert "--scale-jitter" in capsys.readouterr().err
 
 
 def test_a_fixed_strip_model_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
