@@ -63,8 +63,9 @@ class StripAugment:
     radius_scales: tuple[float, ...] = (1.0,)
     # A planned view's band: the strip at this multiple of the served rows and columns per turn over
     # the same radii (people this much larger, their shape kept), cut to a window of the served rows
-    # about a random person; one is drawn per sample. Not `radius_scales`, which keeps the columns:
-    # its people shrink along the ray alone.
+    # about a random person, or under 1 padded to them below the rim (a view whose budget shrinks
+    # its band); one is drawn per sample. Not `radius_scales`, which keeps the columns: its people
+    # shrink along the ray alone.
     band_scales: tuple[float, ...] = (1.0,)
     # > 0: train on windows of this many columns (a multiple of 32), centred near a random label:
     # the network is convolutional, and a window costs a fraction of the strip's forward pass.
@@ -77,8 +78,8 @@ class StripAugment:
     def __post_init__(self) -> None:
         if not self.radius_scales or min(self.radius_scales) <= 0:
             raise ValueError(f"radius_scales must be positive, got {self.radius_scales}")
-        if not self.band_scales or min(self.band_scales) < 1:
-            raise ValueError(f"band_scales must be at least 1, got {self.band_scales}")
+        if not self.band_scales or min(self.band_scales) < 0.5:
+            raise ValueError(f"band_scales must be at least 0.5, got {self.band_scales}")
         if self.crop_width < 0 or self.crop_width % 32:
             raise ValueError(f"crop_width must be 0 or a positive multiple of 32, got {self.crop_width}")
         if not 1 <= self.unwrap_samples <= 4:
@@ -156,6 +157,15 @@ def crop_rows(image: NDArray[np.uint8], labels: FloatArray, feet: FloatArray, he
         centre = rng.uniform(0, strip_h)
     y0 = int(np.clip(round((centre - height / 2) / 32) * 32, 0, strip_h - height))
     return _window(image, labels, feet, y0, height, axis=1)
+
+
+def pad_rows(image: NDArray[np.uint8], height: int, pad_value: int) -> NDArray[np.uint8]:
+    """A strip (H, W, 3) of fewer than `height` rows with pad rows below it (past the rim, as a
+    planned view pads a band's piece to the canvas); the strip itself where it has them."""
+    missing = height - image.shape[0]
+    if missing <= 0:
+        return image
+    return np.concatenate([image, np.full((missing, *image.shape[1:]), pad_value, dtype=image.dtype)])
 
 
 def _window(image: NDArray[np.uint8], labels: FloatArray, feet: FloatArray, start: int, size: int,
@@ -362,6 +372,7 @@ class PolarStripDataset:
             image, labels, feet = crop_window(image, labels, feet, self.augment.crop_width, rng)
         image, labels, feet = crop_rows(image, labels, feet, self.config.input_size, rng)  # a band's rows
         image = photometric(image, self.augment, rng)
+        image = pad_rows(image, self.config.input_size, self.info.pad_value)  # a band under scale 1
         edge = np.array([EDGE_TO_CENTRE_PX, EDGE_TO_CENTRE_PX, 0.0])
         return StripSample(image, labels + EDGE_TO_CENTRE_PX, feet + edge)
 

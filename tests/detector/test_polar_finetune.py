@@ -138,7 +138,27 @@ def test_a_band_scale_strip_is_the_band_of_a_planned_view(toy_dataset: Callable[
     assert len(labels) >= 1 and np.all(labels[:, 1] >= -0.5) and np.all(labels[:, 3] <= 63.5)
     assert len(sample.feet) == len(labels)
     with pytest.raises(ValueError, match="band_scales"):
-        StripAugment(band_scales=(0.5,))
+        StripAugment(band_scales=(0.4,))
+
+
+def test_a_band_under_scale_one_is_padded_to_the_served_rows(toy_dataset: Callable[..., Path]) -> None:
+    # a view whose budget shrinks its band reads people smaller: such a strip has fewer rows than
+    # the served one, and its samples are padded below the rim so that batches stack
+    frame = read_dataset(toy_dataset(count=1, size=128, people=4))[0]
+    info = training_info(CONFIG)
+    _, xyxy, _, _ = frame_strip(frame, info)
+    small, small_xyxy, _, _ = frame_strip(frame, info, band_scale=0.75)
+    assert small.shape == (48, 192, 3)
+    sizes = xyxy[:, 2:] - xyxy[:, :2]
+    np.testing.assert_allclose(small_xyxy[:, 2:] - small_xyxy[:, :2], 0.75 * sizes, rtol=0.05)
+    dataset = PolarStripDataset([frame], CONFIG, StripAugment(band_scales=(0.75,), flip=0.0), seed=1)
+    dataset.set_epoch(0)
+    sample = dataset[0]
+    assert sample.image.shape == (64, 192 + 32, 3)
+    assert np.all(sample.image[48:] == info.pad_value)  # the rows past the band's rim
+    assert not np.all(sample.image[:48] == info.pad_value)
+    labels = sample.labels_xyxy - EDGE_TO_CENTRE_PX
+    assert len(labels) >= 1 and np.all(labels[:, 3] <= 47.5)  # every person inside the band's rows
 
 
 def test_the_strip_cache_stops_at_its_bound_with_the_same_samples(toy_dataset: Callable[..., Path]) -> None:
