@@ -39,6 +39,7 @@ from contract import ModelError, ModelRunner, OnnxModel, SessionThreads
 from contract.detect import ContractModel
 from contract.metadata import OperatingPoint
 from contract.views import DEFAULT_VIEW, view_plan
+from fisheye.camera import MAX_SECOND_LOOK_PIXELS
 from fisheye.view_plan import SECOND_LOOK_FULL_PIXELS, ViewPlanConfig
 
 # The designs compared for 0.6.0: the trained strip, and two bands (the rim at 1.5x) with the inner
@@ -144,12 +145,16 @@ def chosen_point(model: ContractModel, frames: Sequence[Any], view: ViewPlanConf
 
 def scaled_view(view: ViewPlanConfig, factor: float) -> ViewPlanConfig:
     """`view` with its bands and its nadir view read `factor` times as large (every person that
-    much larger in the input), its budget grown by factor² and a fifth more for the stride's
-    rounding, so that the same layout is planned at the larger scales."""
+    much larger in the input), its budgets (the view's and the second look's) grown by factor² and
+    a fifth more for the stride's rounding, so that the same layout is planned at the larger scales."""
+    if factor == 1:
+        return view
+    grown = factor ** 2 * 1.2
     return dataclasses.replace(
         view, scales=tuple(scale * factor for scale in view.scales), nadir_scale=view.nadir_scale * factor,
         outer_row_scale=None if view.outer_row_scale is None else view.outer_row_scale * factor,
-        max_pixels=math.ceil(view.max_pixels * factor ** 2 * (1.2 if factor != 1 else 1.0)))
+        max_pixels=math.ceil(view.max_pixels * grown),
+        second_look_pixels=min(math.ceil(view.second_look_pixels * grown), MAX_SECOND_LOOK_PIXELS))
 
 
 def design_figures(design: str, model: ContractModel, view: ViewPlanConfig, sets: dict[str, list[Any]],

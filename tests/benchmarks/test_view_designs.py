@@ -72,6 +72,9 @@ def test_a_scaled_view_plans_the_same_layout_with_every_person_larger() -> None:
     bands = DESIGNS["two bands 1.0x / 1.5x, margin 0.6"]
     wide = plan_view(camera, config=scaled_view(bands, 1.1))
     assert [b.scale for b in wide.bands] == pytest.approx([1.1, 1.65])
+    # the second look's patches grow with their bands, and so does its budget
+    looking = DESIGNS["the default view + second look"]
+    assert scaled_view(looking, 1.1).second_look_pixels > looking.second_look_pixels
 
 
 def test_scale_jitter_reads_every_set_again_at_each_factor(tmp_path: Path,
