@@ -103,6 +103,7 @@ DESIGNS: dict[str, ViewPlanConfig] = {
        for way, keep in (("no nadir view (the rule)", None), ("nadir view beside a smaller strip", 0.5))},
 }
 FIGURES = ("AP50", "precision", "recall", "AP_far", "recall_nadir", "mPE", "mPE_reported")
+JITTERED = ("AP50", "precision")  # the figures `--scale-jitter` reads at every scale
 
 
 def evaluate_design(model: ContractModel, view: ViewPlanConfig, frames: Sequence[Any],
@@ -163,19 +164,23 @@ def design_figures(design: str, model: ContractModel, view: ViewPlanConfig, sets
     """`evaluate_design` on every set, at the point chosen on `choose_on` (None: the model's own for
     each layout); the figures also go to stderr as one JSON line as soon as they are made. With
     `jitter`, each set is read again at each of those scale factors (`scaled_view`) at the same
-    point, and its figures gain `AP50_by_scale` (factor 1 among them) and their mean."""
+    point, and its figures gain `AP50_by_scale` and `precision_by_scale` (factor 1 among them) and
+    their mean, min and max (`AP50_over_scales`, `precision_over_scales`)."""
     point = None if choose_on is None else chosen_point(model, choose_on, view)
     figures = {name: evaluate_design(model, view, frames, point) for name, frames in sets.items()}
     for factor in jitter:
         scaled = scaled_view(view, factor)
         for name, frames in sets.items():
-            by_scale = figures[name].setdefault("AP50_by_scale", {"1": figures[name]["AP50"]})
-            by_scale[f"{factor:g}"] = evaluate_design(model, scaled, frames, point)["AP50"]
+            read = evaluate_design(model, scaled, frames, point)
+            for key in JITTERED:
+                by_scale = figures[name].setdefault(f"{key}_by_scale", {"1": figures[name][key]})
+                by_scale[f"{factor:g}"] = read[key]
     for by_set in figures.values():
-        if "AP50_by_scale" in by_set:
-            values = list(by_set["AP50_by_scale"].values())
-            by_set["AP50_over_scales"] = {"mean": sum(values) / len(values), "min": min(values),
-                                          "max": max(values)}
+        for key in JITTERED:
+            if f"{key}_by_scale" in by_set:
+                values = list(by_set[f"{key}_by_scale"].values())
+                by_set[f"{key}_over_scales"] = {"mean": sum(values) / len(values), "min": min(values),
+                                                "max": max(values)}
     print(json.dumps({design: figures}), file=sys.stderr, flush=True)
     return figures
 
@@ -204,7 +209,7 @@ def markdown_table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
     header = ["design", *[f"{s} AP50 / P" for s in sets], "renders AP_far / recall_nadir / mPE", "cost"]
     jittered = any("AP50_over_scales" in by_set[s] for by_set in results.values() for s in sets)
     if jittered:
-        header += [f"{s} AP50 over scales: mean [min, max]" for s in sets]
+        header += [f"{s} AP50 over scales: mean [min, max] / P mean" for s in sets]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for design, by_set in results.items():
         first = by_set[sets[0]]
@@ -216,7 +221,8 @@ def markdown_table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
         cells.append(" / ".join(cell(extra.get(k)) for k in ("AP_far", "recall_nadir", "mPE")))
         cells.append(f"{by_set[sets[0]]['cost_ratio']:.2f}x")
         if jittered:
-            cells += [over_scales(by_set[s].get("AP50_over_scales")) for s in sets]
+            cells += [f"{over_scales(by_set[s].get('AP50_over_scales'))} / "
+                      f"{cell((by_set[s].get('precision_over_scales') or {}).get('mean'))}" for s in sets]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

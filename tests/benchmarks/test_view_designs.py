@@ -94,10 +94,13 @@ def test_scale_jitter_reads_every_set_again_at_each_factor(tmp_path: Path,
     onnx = OnnxModel(model, SessionThreads(intra_op=1))
     frames = read_dataset(samples)[:2]
     assert by_scale["0.9"] == evaluate_design(onnx, scaled_view(DESIGNS[design], 0.9), frames)["AP50"]
+    assert figures["precision_by_scale"]["0.9"] == evaluate_design(
+        onnx, scaled_view(DESIGNS[design], 0.9), frames)["precision"]
+    assert figures["precision_by_scale"]["1"] == figures["precision"]
     summary = figures["AP50_over_scales"]
     assert summary["min"] == min(by_scale.values()) and summary["max"] == max(by_scale.values())
     assert summary["mean"] == pytest.approx(sum(by_scale.values()) / 3)
-    assert "samples AP50 over scales: mean [min, max]" in capsys.readouterr().out
+    assert "samples AP50 over scales: mean [min, max] / P mean" in capsys.readouterr().out
     # a factor of 1 (always read) or outside [0.5, 2] is refused
     for bad in ("1", "3"):
         assert main(["--model", str(model), "--data", f"samples={samples}", "--scale-jitter", bad]) == 2
