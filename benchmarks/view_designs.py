@@ -159,30 +159,43 @@ def scaled_view(view: ViewPlanConfig, factor: float) -> ViewPlanConfig:
 
 
 def design_figures(design: str, model: ContractModel, view: ViewPlanConfig, sets: dict[str, list[Any]],
-                   choose_on: Sequence[Any] | None, jitter: Sequence[float] = ()
-                   ) -> dict[str, dict[str, Any]]:
+                   choose_on: Sequence[Any] | None, jitter: Sequence[float] = (),
+                   rotations: Sequence[float] = ()) -> dict[str, dict[str, Any]]:
     """`evaluate_design` on every set, at the point chosen on `choose_on` (None: the model's own for
     each layout); the figures also go to stderr as one JSON line as soon as they are made. With
     `jitter`, each set is read again at each of those scale factors (`scaled_view`) at the same
     point, and its figures gain `AP50_by_scale` and `precision_by_scale` (factor 1 among them) and
-    their mean, min and max (`AP50_over_scales`, `precision_over_scales`)."""
+    their mean, min and max (`AP50_over_scales`, `precision_over_scales`); with `rotations`, read
+    again with every band's turn started that many columns further round (`start_columns`), the
+    same as `..._by_rotation` (0 among them) and `..._over_rotations`."""
     point = None if choose_on is None else chosen_point(model, choose_on, view)
     figures = {name: evaluate_design(model, view, frames, point) for name, frames in sets.items()}
-    for factor in jitter:
-        scaled = scaled_view(view, factor)
-        for name, frames in sets.items():
-            read = evaluate_design(model, scaled, frames, point)
-            for key in JITTERED:
-                by_scale = figures[name].setdefault(f"{key}_by_scale", {"1": figures[name][key]})
-                by_scale[f"{factor:g}"] = read[key]
-    for by_set in figures.values():
-        for key in JITTERED:
-            if f"{key}_by_scale" in by_set:
-                values = list(by_set[f"{key}_by_scale"].values())
-                by_set[f"{key}_over_scales"] = {"mean": sum(values) / len(values), "min": min(values),
-                                                "max": max(values)}
+    read_again(model, {f"{factor:g}": scaled_view(view, factor) for factor in jitter}, "scale", "1",
+               figures, sets, point)
+    read_again(model, {f"{columns:g}": dataclasses.replace(view, start_columns=view.start_columns + columns)
+                       for columns in rotations}, "rotation", "0", figures, sets, point)
     print(json.dumps({design: figures}), file=sys.stderr, flush=True)
     return figures
+
+
+def read_again(model: ContractModel, variants: dict[str, ViewPlanConfig], kind: str, served: str,
+               figures: dict[str, dict[str, Any]], sets: dict[str, list[Any]], point: OperatingPoint | None
+               ) -> None:
+    """Every set read with each variant of the view at `point`: the JITTERED figures of each, by
+    label, beside the served read's (`served`), into `figures[set]["<figure>_by_<kind>"]`, and
+    their mean, min and max into `"<figure>_over_<kind>s"`."""
+    if not variants:
+        return
+    for label, view in variants.items():
+        for name, frames in sets.items():
+            read = evaluate_design(model, view, frames, point)
+            for key in JITTERED:
+                figures[name].setdefault(f"{key}_by_{kind}", {served: figures[name][key]})[label] = read[key]
+    for by_set in figures.values():
+        for key in JITTERED:
+            values = list(by_set[f"{key}_by_{kind}"].values())
+            by_set[f"{key}_over_{kind}s"] = {"mean": sum(values) / len(values), "min": min(values),
+                                             "max": max(values)}
 
 
 def report(results: dict[str, dict[str, dict[str, Any]]], json_path: Path | None) -> None:
@@ -196,7 +209,7 @@ def cell(value: Any) -> str:
     return "–" if value is None or value != value else f"{value:.3f}"
 
 
-def over_scales(summary: dict[str, float] | None) -> str:
+def over_reads(summary: dict[str, float] | None) -> str:
     return "–" if summary is None else (
         f"{cell(summary['mean'])} [{cell(summary['min'])}, {cell(summary['max'])}]")
 
@@ -207,9 +220,9 @@ def markdown_table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
     ratio of the first set's plans."""
     sets = list(next(iter(results.values())))
     header = ["design", *[f"{s} AP50 / P" for s in sets], "renders AP_far / recall_nadir / mPE", "cost"]
-    jittered = any("AP50_over_scales" in by_set[s] for by_set in results.values() for s in sets)
-    if jittered:
-        header += [f"{s} AP50 over scales: mean [min, max] / P mean" for s in sets]
+    kinds = [kind for kind in ("scales", "rotations")
+             if any(f"AP50_over_{kind}" in by_set[s] for by_set in results.values() for s in sets)]
+    header += [f"{s} AP50 over {kind}: mean [min, max] / P mean" for kind in kinds for s in sets]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for design, by_set in results.items():
         first = by_set[sets[0]]
@@ -220,9 +233,9 @@ def markdown_table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
         extra = by_set[rendered[-1]] if rendered else {}
         cells.append(" / ".join(cell(extra.get(k)) for k in ("AP_far", "recall_nadir", "mPE")))
         cells.append(f"{by_set[sets[0]]['cost_ratio']:.2f}x")
-        if jittered:
-            cells += [f"{over_scales(by_set[s].get('AP50_over_scales'))} / "
-                      f"{cell((by_set[s].get('precision_over_scales') or {}).get('mean'))}" for s in sets]
+        cells += [f"{over_reads(by_set[s].get(f'AP50_over_{kind}'))} / "
+                  f"{cell((by_set[s].get(f'precision_over_{kind}') or {}).get('mean'))}"
+                  for kind in kinds for s in sets]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -244,6 +257,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                              "factors of their scales (e.g. 0.9 0.95 1.05 1.1), at the same operating "
                              "point, and report AP50's mean, min and max over them and 1: a few real "
                              "frames' AP50 at one scale is one draw of how large their people come out")
+    parser.add_argument("--rotate-jitter", type=float, nargs="+", default=(), metavar="COLUMNS",
+                        help="also read every set with each band's turn started these many columns "
+                             "further round (e.g. 4 8 12 16 20 24 28: the network's cells fall elsewhere "
+                             "on every person, the scale unchanged), at the same point, and report AP50's "
+                             "and precision's mean, min and max over them and 0")
     parser.add_argument("--threads", type=int, default=2, help="inference threads (default 2)")
     parser.add_argument("--json", type=Path, default=None, help="where to write every figure")
     args = parser.parse_args(argv)
@@ -258,6 +276,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if any(not 0.5 <= factor <= 2 or factor == 1 for factor in args.scale_jitter):
             raise ValueError(f"--scale-jitter factors must lie in [0.5, 2] and differ from 1, got "
                              f"{args.scale_jitter}")
+        if any(not 0 < columns < 2048 for columns in args.rotate_jitter):
+            raise ValueError(f"--rotate-jitter columns must lie in (0, 2048), got {args.rotate_jitter}")
     except (ModelError, DatasetFormatError, ValueError) as error:
         print(f"view_designs: {error}", file=sys.stderr)
         return 2
@@ -265,7 +285,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     for design, view in DESIGNS.items():
         if args.design is not None and design not in args.design:
             continue
-        results[design] = design_figures(design, model, view, sets, choose_on, args.scale_jitter)
+        results[design] = design_figures(design, model, view, sets, choose_on, args.scale_jitter,
+                                         args.rotate_jitter)
     report(results, args.json)
     return 0
 

@@ -127,6 +127,12 @@ class ViewPlanConfig:
     # (docs/DETECTOR.md, "The rim band widened across the ray alone"): a design, not the rule. None (the
     # default): the outer band is scaled alike on both axes, people keep the shape the network learnt.
     outer_row_scale: float | None = None
+    # Every band's turn starts this many of its columns further round from the camera's +x axis:
+    # the strip's seam, and the network's grid of cells over the people, moved by that much. A
+    # person's detection depends on where the cells fall on it (a few columns moved Lunch3's AP50
+    # from 0.933 to 0.736; docs/DETECTOR.md, "Real frames read at several scales"): the benchmark
+    # reads the real frames over several starts. 0 (the default): the turn starts at the +x axis.
+    start_columns: float = 0.0
     # Each px of the bands the mean of this many bilinear samples of the frame along each axis
     # (`fisheye.polar.PolarGrid.sampling_maps`), the frame decoded that much larger: where a band px
     # spans several frame px (across the ray at the rim) it averages them as a downscale does. With
@@ -169,6 +175,8 @@ class ViewPlanConfig:
             raise ValueError("need 0 < nadir_fraction < nadir_view_fraction <= 1, nadir_scale in [0.25, 8]")
         if self.nadir_min_scale is not None and not 0 < self.nadir_min_scale <= 1:
             raise ValueError(f"nadir_min_scale must lie in (0, 1], got {self.nadir_min_scale}")
+        if not 0 <= self.start_columns < 4096:
+            raise ValueError(f"start_columns must lie in [0, 4096), got {self.start_columns}")
         if self.min_outer_fraction is not None and not 0 < self.min_outer_fraction < 1:
             raise ValueError(f"min_outer_fraction must lie in (0, 1), got {self.min_outer_fraction}")
         if self.outer_row_scale is not None and not self.scales[0] <= self.outer_row_scale <= self.scales[-1]:
@@ -400,7 +408,8 @@ def _layout(camera: FisheyeCamera, bands: list[ViewBand], reference: ViewReferen
         turn = round(piece_columns) * band.pieces
         for k in range(band.pieces):
             grids.append(PolarGrid(principal_point=pp, radius_px=band.radius_px, height=band.rows, width=turn,
-                                   overlap=min(overlap, turn), start_rad=TWO_PI * k / band.pieces,
+                                   overlap=min(overlap, turn),
+                                   start_rad=TWO_PI * (k / band.pieces + config.start_columns / turn),
                                    inner_radius_px=band.inner_radius_px, span=round(piece_columns)))
             offsets.append(row)
             row += band.rows + config.gap_rows

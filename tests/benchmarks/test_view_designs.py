@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -105,6 +106,32 @@ def test_scale_jitter_reads_every_set_again_at_each_factor(tmp_path: Path,
     for bad in ("1", "3"):
         assert main(["--model", str(model), "--data", f"samples={samples}", "--scale-jitter", bad]) == 2
     assert "--scale-jitter" in capsys.readouterr().err
+
+
+def test_rotate_jitter_reads_every_set_again_with_the_turn_started_further_round(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from contract import OnnxModel, SessionThreads
+    from detector.data.readers import read_dataset
+
+    model = save_polar_double(tmp_path / "planned.onnx", planned=True)
+    out = tmp_path / "designs.json"
+    samples = ROOT / "samples" / "annotations.json"
+    design = "strip + nadir view 0.35 at 1.25x"
+    assert main(["--model", str(model), "--data", f"samples={samples}", "--design", design, "--limit", "2",
+                 "--threads", "1", "--rotate-jitter", "8", "16", "--json", str(out)]) == 0
+    figures = json.loads(out.read_text())[design]["samples"]
+    assert list(figures["AP50_by_rotation"]) == ["0", "8", "16"]
+    assert figures["AP50_by_rotation"]["0"] == figures["AP50"] and "AP50_by_scale" not in figures
+    onnx = OnnxModel(model, SessionThreads(intra_op=1))
+    turned = dataclasses.replace(DESIGNS[design], start_columns=16)
+    read = evaluate_design(onnx, turned, read_dataset(samples)[:2])
+    assert figures["AP50_by_rotation"]["16"] == read["AP50"]
+    assert figures["precision_by_rotation"]["16"] == read["precision"]
+    summary = figures["precision_over_rotations"]
+    assert summary["min"] <= summary["mean"] <= summary["max"]
+    assert "samples AP50 over rotations: mean [min, max] / P mean" in capsys.readouterr().out
+    assert main(["--model", str(model), "--data", f"samples={samples}", "--rotate-jitter", "0"]) == 2
+    assert "--rotate-jitter" in capsys.readouterr().err
 
 
 def test_a_fixed_strip_model_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -169,7 +169,8 @@ def test_a_budget_below_any_view_is_refused() -> None:
                                     {"min_outer_fraction": 0.0}, {"min_outer_fraction": 1.0},
                                     {"outer_row_scale": 0.5}, {"outer_row_scale": 2.0},
                                     {"unwrap_samples": 0}, {"unwrap_samples": 5},
-                                    {"nadir_min_scale": 0.0}, {"nadir_min_scale": 1.5}])
+                                    {"nadir_min_scale": 0.0}, {"nadir_min_scale": 1.5},
+                                    {"start_columns": -1.0}, {"start_columns": 5000.0}])
 def test_config_refuses_nonsense(kwargs: dict[str, object]) -> None:
     with pytest.raises(ValueError):
         ViewPlanConfig(**kwargs)  # type: ignore[arg-type]
@@ -202,6 +203,18 @@ def test_a_budget_without_room_for_the_nadir_view_says_so() -> None:
     assert any("no nadir view (384 x 384 px more)" in note for note in plan.notes)
     off = plan_view(DEMO, config=ViewPlanConfig(max_pixels=4_000_000, nadir_fraction=None))
     assert off.nadir is None and not any("nadir" in note for note in off.notes)
+
+
+def test_start_columns_turn_every_band_by_that_many_of_its_columns() -> None:
+    plain = plan_view(DEMO, config=LARGE)
+    turned = plan_view(DEMO, config=dataclasses.replace(LARGE, start_columns=8))
+    assert turned.canvas_wh == plain.canvas_wh and turned.bands == plain.bands
+    for grid, was in zip(turned.grids, plain.grids, strict=True):
+        assert grid.start_rad - was.start_rad == pytest.approx(2 * math.pi * 8 / grid.width)
+        # each column shows the angle 8 columns on in the plain turn: a column roll of the same strip
+        np.testing.assert_allclose(grid.column_to_angle_rad(np.arange(32)),
+                                   was.column_to_angle_rad(np.arange(8, 40)))
+    assert plan_view(DEMO, config=dataclasses.replace(LARGE, start_columns=0)) == plain
 
 
 def test_the_nadir_view_may_be_kept_beside_a_smaller_strip() -> None:
