@@ -5,7 +5,9 @@ from __future__ import annotations
 import dataclasses
 import json
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -15,7 +17,7 @@ from polar_double import save_polar_double
 
 from benchmarks.view_designs import DESIGNS, evaluate_design, main, markdown_table, scaled_view
 from fisheye import load_camera
-from fisheye.view_plan import plan_view
+from fisheye.view_plan import ViewPlanConfig, plan_view
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -78,31 +80,41 @@ def test_a_scaled_view_plans_the_same_layout_with_every_person_larger() -> None:
     assert scaled_view(looking, 1.1).second_look_pixels > looking.second_look_pixels
 
 
-def test_scale_jitter_reads_every_set_again_at_each_factor(tmp_path: Path,
-                                                           capsys: pytest.CaptureFixture[str]) -> None:
+JITTERED_DESIGN = "strip + nadir view 0.35 at 1.25x"
+
+
+def read_jittered(tmp_path: Path, *jitter: str
+                  ) -> tuple[Path, dict[str, Any], Callable[[ViewPlanConfig], Any]]:
+    """The toy planned model, its figures on two sample frames read with `jitter`'s options, and
+    `evaluate_design` of a view of it on the same frames."""
     from contract import OnnxModel, SessionThreads
     from detector.data.readers import read_dataset
 
     model = save_polar_double(tmp_path / "planned.onnx", planned=True)
     out = tmp_path / "designs.json"
     samples = ROOT / "samples" / "annotations.json"
-    design = "strip + nadir view 0.35 at 1.25x"
-    assert main(["--model", str(model), "--data", f"samples={samples}", "--design", design, "--limit", "2",
-                 "--threads", "1", "--scale-jitter", "0.9", "1.1", "--json", str(out)]) == 0
-    figures = json.loads(out.read_text())[design]["samples"]
-    by_scale = figures["AP50_by_scale"]
-    assert list(by_scale) == ["1", "0.9", "1.1"] and by_scale["1"] == figures["AP50"]
+    assert main(["--model", str(model), "--data", f"samples={samples}", "--design", JITTERED_DESIGN,
+                 "--limit", "2", "--threads", "1", *jitter, "--json", str(out)]) == 0
     onnx = OnnxModel(model, SessionThreads(intra_op=1))
     frames = read_dataset(samples)[:2]
-    assert by_scale["0.9"] == evaluate_design(onnx, scaled_view(DESIGNS[design], 0.9), frames)["AP50"]
-    assert figures["precision_by_scale"]["0.9"] == evaluate_design(
-        onnx, scaled_view(DESIGNS[design], 0.9), frames)["precision"]
+    return model, json.loads(out.read_text())[JITTERED_DESIGN]["samples"], (
+        lambda view: evaluate_design(onnx, view, frames))
+
+
+def test_scale_jitter_reads_every_set_again_at_each_factor(tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    model, figures, evaluated = read_jittered(tmp_path, "--scale-jitter", "0.9", "1.1")
+    by_scale = figures["AP50_by_scale"]
+    assert list(by_scale) == ["1", "0.9", "1.1"] and by_scale["1"] == figures["AP50"]
+    read = evaluated(scaled_view(DESIGNS[JITTERED_DESIGN], 0.9))
+    assert by_scale["0.9"] == read["AP50"] and figures["precision_by_scale"]["0.9"] == read["precision"]
     assert figures["precision_by_scale"]["1"] == figures["precision"]
     summary = figures["AP50_over_scales"]
     assert summary["min"] == min(by_scale.values()) and summary["max"] == max(by_scale.values())
     assert summary["mean"] == pytest.approx(sum(by_scale.values()) / 3)
     assert "samples AP50 over scales: mean [min, max] / P mean" in capsys.readouterr().out
     # a factor of 1 (always read) or outside [0.5, 2] is refused
+    samples = ROOT / "samples" / "annotations.json"
     for bad in ("1", "3"):
         assert main(["--model", str(model), "--data", f"samples={samples}", "--scale-jitter", bad]) == 2
     assert "--scale-jitter" in capsys.readouterr().err
@@ -110,26 +122,16 @@ def test_scale_jitter_reads_every_set_again_at_each_factor(tmp_path: Path,
 
 def test_rotate_jitter_reads_every_set_again_with_the_turn_started_further_round(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from contract import OnnxModel, SessionThreads
-    from detector.data.readers import read_dataset
-
-    model = save_polar_double(tmp_path / "planned.onnx", planned=True)
-    out = tmp_path / "designs.json"
-    samples = ROOT / "samples" / "annotations.json"
-    design = "strip + nadir view 0.35 at 1.25x"
-    assert main(["--model", str(model), "--data", f"samples={samples}", "--design", design, "--limit", "2",
-                 "--threads", "1", "--rotate-jitter", "8", "16", "--json", str(out)]) == 0
-    figures = json.loads(out.read_text())[design]["samples"]
+    model, figures, evaluated = read_jittered(tmp_path, "--rotate-jitter", "8", "16")
     assert list(figures["AP50_by_rotation"]) == ["0", "8", "16"]
     assert figures["AP50_by_rotation"]["0"] == figures["AP50"] and "AP50_by_scale" not in figures
-    onnx = OnnxModel(model, SessionThreads(intra_op=1))
-    turned = dataclasses.replace(DESIGNS[design], start_columns=16)
-    read = evaluate_design(onnx, turned, read_dataset(samples)[:2])
+    read = evaluated(dataclasses.replace(DESIGNS[JITTERED_DESIGN], start_columns=16))
     assert figures["AP50_by_rotation"]["16"] == read["AP50"]
     assert figures["precision_by_rotation"]["16"] == read["precision"]
     summary = figures["precision_over_rotations"]
     assert summary["min"] <= summary["mean"] <= summary["max"]
     assert "samples AP50 over rotations: mean [min, max] / P mean" in capsys.readouterr().out
+    samples = ROOT / "samples" / "annotations.json"
     assert main(["--model", str(model), "--data", f"samples={samples}", "--rotate-jitter", "0"]) == 2
     assert "--rotate-jitter" in capsys.readouterr().err
 
