@@ -480,23 +480,26 @@ def _narrowed(camera: FisheyeCamera, bands: list[ViewBand], top: float, rows_per
 
 
 def _within_budget(camera: FisheyeCamera, bands: list[ViewBand], top: float, rows_per_px: float,
-                   reference: ViewReference, config: ViewPlanConfig
+                   reference: ViewReference, config: ViewPlanConfig, reserve: int = 0
                    ) -> tuple[list[ViewBand], Layout, list[str]]:
     """The bands (cut into pieces) and their layout within `config.max_pixels`: the outer band
     starts further out at its scale where the config asks for it (`_narrowed`), else steps down the
     scales (to one band at the smallest), then the one band shrinks; notes say where the budget
-    bound. ViewPlanError when under a quarter of the trained scale or 64 rows would be left."""
+    bound. `reserve` px of the budget are kept aside (the nadir view's, where it must stay); the
+    notes name the whole budget. ViewPlanError when under a quarter of the trained scale or 64 rows
+    would be left."""
+    budget = config.max_pixels - reserve
     notes: list[str] = []
     bands = _with_pieces(bands)
     layout = _layout(camera, bands, reference, config)
-    if _pixels(layout) > config.max_pixels and len(bands) == 2:
+    if _pixels(layout) > budget and len(bands) == 2:
         narrowed = _narrowed(camera, bands, top, rows_per_px, reference, config)
         if narrowed is not None:
             notes.append(f"budget {config.max_pixels} px binds: the outer band at scale {bands[1].scale:g} "
                          f"reports from {narrowed[0][1].owned_px[0]:.0f} px out, not "
                          f"{bands[1].owned_px[0]:.0f}")
             return narrowed[0], narrowed[1], notes
-    while _pixels(layout) > config.max_pixels and len(bands) == 2:
+    while _pixels(layout) > budget and len(bands) == 2:
         lower = max(s for s in config.scales if s < bands[1].scale)
         notes.append(f"budget {config.max_pixels} px binds: the outer band at scale {lower:g}, "
                      f"not {bands[1].scale:g}")
@@ -508,9 +511,9 @@ def _within_budget(camera: FisheyeCamera, bands: list[ViewBand], top: float, row
                                      outer.owned_px, config.outer_row_scale)]
         bands = _with_pieces(bands)
         layout = _layout(camera, bands, reference, config)
-    if _pixels(layout) <= config.max_pixels:
+    if _pixels(layout) <= budget:
         return bands, layout, notes
-    scale = bands[0].scale * math.sqrt(config.max_pixels / _pixels(layout))
+    scale = bands[0].scale * math.sqrt(budget / _pixels(layout))
     while True:  # rounding to the stride may leave it a little over: shrink until it fits
         if scale < 0.25 or scale * rows_per_px * top < 2 * STRIDE:  # fewer rows show nobody
             raise ViewPlanError(f"a budget of {config.max_pixels} px leaves under a quarter of the trained "
@@ -519,7 +522,7 @@ def _within_budget(camera: FisheyeCamera, bands: list[ViewBand], top: float, row
                                 f"at scale {bands[0].scale:g})")
         shrunk = [_band(0.0, top, scale, rows_per_px)]
         layout = _layout(camera, shrunk, reference, config)
-        if _pixels(layout) <= config.max_pixels:
+        if _pixels(layout) <= budget:
             notes.append(f"budget {config.max_pixels} px binds: one band at scale {scale:.2f}")
             return shrunk, layout, notes
         scale *= 0.97
@@ -600,17 +603,14 @@ def _beside_nadir(camera: FisheyeCamera, wanted: list[ViewBand], planned: list[V
     within the whole budget), each at least that fraction of its planned scale; None otherwise."""
     if config.nadir_min_scale is None or config.max_pixels <= side ** 2:
         return None
-    rest = dataclasses.replace(config, max_pixels=config.max_pixels - side ** 2)
     try:
-        bands, layout, notes = _within_budget(camera, wanted, top, rows_per_px, reference, rest)
+        bands, layout, notes = _within_budget(camera, wanted, top, rows_per_px, reference, config, side ** 2)
     except ViewPlanError:
         return None
     if len(bands) != len(planned) or any(band.scale < config.nadir_min_scale * was.scale
                                          for band, was in zip(bands, planned, strict=True)):
         return None
-    said, says = f"budget {rest.max_pixels} px", f"budget {config.max_pixels} px"
-    return bands, layout, [note.replace(said, says) + f"; the nadir view ({side} x {side} px) kept beside it"
-                           for note in notes]
+    return bands, layout, [f"{note}; the nadir view ({side} x {side} px) kept beside it" for note in notes]
 
 
 def _strip_from(bands: list[ViewBand], camera: FisheyeCamera, rows_per_px: float, config: ViewPlanConfig

@@ -118,47 +118,34 @@ def test_samples_are_reproducible_and_flipped_labels_stay_in_the_strip(
     assert images.shape == (2, 3, 64, 288) and len(targets) == 2
 
 
-def test_a_band_scale_strip_is_the_band_of_a_planned_view(toy_dataset: Callable[..., Path]) -> None:
+@pytest.mark.parametrize("scale", [1.5, 0.75])
+def test_a_band_scale_strip_is_the_band_of_a_planned_view(toy_dataset: Callable[..., Path],
+                                                          scale: float) -> None:
     frame = read_dataset(toy_dataset(count=1, size=128, people=4))[0]
     info = training_info(CONFIG)
     _, xyxy, feet, _ = frame_strip(frame, info)
-    band, band_xyxy, band_feet, _ = frame_strip(frame, info, band_scale=1.5)
-    # 1.5x the rows and columns over the same radii: people 1.5x larger in both directions
-    assert band.shape == (96, 384, 3)
+    band, band_xyxy, band_feet, _ = frame_strip(frame, info, band_scale=scale)
+    # the rows and columns times the scale over the same radii: people that much larger (or
+    # smaller, a view whose budget shrinks its band) in both directions
+    rows, columns = round(64 * scale), round(256 * scale)
+    assert band.shape == (rows, columns, 3)
     sizes, band_sizes = xyxy[:, 2:] - xyxy[:, :2], band_xyxy[:, 2:] - band_xyxy[:, :2]
-    np.testing.assert_allclose(band_sizes, 1.5 * sizes, rtol=0.05)
-    np.testing.assert_allclose(band_feet[:, :2] + 0.5, 1.5 * (feet[:, :2] + 0.5), rtol=0.05, atol=0.5)
-    np.testing.assert_allclose(band_feet[:, 2], feet[:, 2] / 1.5, rtol=0.05)  # metres per strip px
-    # samples keep the served rows (a window about a person) so that batches stack
-    dataset = PolarStripDataset([frame], CONFIG, StripAugment(band_scales=(1.5,), flip=0.0), seed=1)
+    np.testing.assert_allclose(band_sizes, scale * sizes, rtol=0.05)
+    np.testing.assert_allclose(band_feet[:, :2] + 0.5, scale * (feet[:, :2] + 0.5), rtol=0.05, atol=0.5)
+    np.testing.assert_allclose(band_feet[:, 2], feet[:, 2] / scale, rtol=0.05)  # metres per strip px
+    # samples keep the served rows so that batches stack: a window about a person of a larger
+    # band, a smaller one padded below its rim
+    dataset = PolarStripDataset([frame], CONFIG, StripAugment(band_scales=(scale,), flip=0.0), seed=1)
     dataset.set_epoch(0)
     sample = dataset[0]
-    assert sample.image.shape == (64, 384 + 32, 3)
+    assert sample.image.shape == (64, columns + 32, 3)
     labels = sample.labels_xyxy - EDGE_TO_CENTRE_PX
-    assert len(labels) >= 1 and np.all(labels[:, 1] >= -0.5) and np.all(labels[:, 3] <= 63.5)
+    inside = min(rows, 64) - 0.5
+    assert len(labels) >= 1 and np.all(labels[:, 1] >= -0.5) and np.all(labels[:, 3] <= inside)
     assert len(sample.feet) == len(labels)
+    assert np.all(sample.image[rows:] == info.pad_value) and not np.all(sample.image[:rows] == info.pad_value)
     with pytest.raises(ValueError, match="band_scales"):
         StripAugment(band_scales=(0.4,))
-
-
-def test_a_band_under_scale_one_is_padded_to_the_served_rows(toy_dataset: Callable[..., Path]) -> None:
-    # a view whose budget shrinks its band reads people smaller: such a strip has fewer rows than
-    # the served one, and its samples are padded below the rim so that batches stack
-    frame = read_dataset(toy_dataset(count=1, size=128, people=4))[0]
-    info = training_info(CONFIG)
-    _, xyxy, _, _ = frame_strip(frame, info)
-    small, small_xyxy, _, _ = frame_strip(frame, info, band_scale=0.75)
-    assert small.shape == (48, 192, 3)
-    sizes = xyxy[:, 2:] - xyxy[:, :2]
-    np.testing.assert_allclose(small_xyxy[:, 2:] - small_xyxy[:, :2], 0.75 * sizes, rtol=0.05)
-    dataset = PolarStripDataset([frame], CONFIG, StripAugment(band_scales=(0.75,), flip=0.0), seed=1)
-    dataset.set_epoch(0)
-    sample = dataset[0]
-    assert sample.image.shape == (64, 192 + 32, 3)
-    assert np.all(sample.image[48:] == info.pad_value)  # the rows past the band's rim
-    assert not np.all(sample.image[:48] == info.pad_value)
-    labels = sample.labels_xyxy - EDGE_TO_CENTRE_PX
-    assert len(labels) >= 1 and np.all(labels[:, 3] <= 47.5)  # every person inside the band's rows
 
 
 def test_the_strip_cache_stops_at_its_bound_with_the_same_samples(toy_dataset: Callable[..., Path]) -> None:
