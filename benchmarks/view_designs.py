@@ -22,7 +22,10 @@ large their people come out in the input, and it swings by 0.1-0.2 from one scal
 (docs/DETECTOR.md, "Real frames read at several scales"). With `--rotate-jitter 4 8 12 16 20 24 28`
 each set is read again with every band's turn started that many columns further round
 (`ViewPlanConfig.start_columns`): the same strip rolled, the network's cells falling elsewhere on
-every person; on the real sets that moves AP50 by up to 0.2, on the renders by 0.02.
+every person; on the real sets that moves AP50 by up to 0.2, on the renders by 0.02. With both
+and `--together`, every scale is read at every start (20 reads for 5 scales and 4 starts), and the
+mean over all the reads is the figure heads are judged by (docs/DETECTOR.md, "The heads judged over
+scales and starts together").
 
 The model must be a planned one (`fishloc export --planned`): the fixed strip is its one-band plan.
 """
@@ -161,22 +164,34 @@ def scaled_view(view: ViewPlanConfig, factor: float) -> ViewPlanConfig:
         second_look_pixels=min(math.ceil(view.second_look_pixels * grown), MAX_SECOND_LOOK_PIXELS))
 
 
+def turned_view(view: ViewPlanConfig, columns: float) -> ViewPlanConfig:
+    """`view` with every band's turn started `columns` of its columns further round."""
+    return dataclasses.replace(view, start_columns=view.start_columns + columns)
+
+
 def design_figures(design: str, model: ContractModel, view: ViewPlanConfig, sets: dict[str, list[Any]],
                    choose_on: Sequence[Any] | None, jitter: Sequence[float] = (),
-                   rotations: Sequence[float] = ()) -> dict[str, dict[str, Any]]:
+                   rotations: Sequence[float] = (), together: bool = False) -> dict[str, dict[str, Any]]:
     """`evaluate_design` on every set, at the point chosen on `choose_on` (None: the model's own for
     each layout); the figures also go to stderr as one JSON line as soon as they are made. With
     `jitter`, each set is read again at each of those scale factors (`scaled_view`) at the same
     point, and its figures gain `AP50_by_scale` and `precision_by_scale` (factor 1 among them) and
     their mean, min and max (`AP50_over_scales`, `precision_over_scales`); with `rotations`, read
     again with every band's turn started that many columns further round (`start_columns`), the
-    same as `..._by_rotation` (0 among them) and `..._over_rotations`."""
+    same as `..._by_rotation` (0 among them) and `..._over_rotations`. With `together`, every scale
+    is read at every start instead, each pair once (`..._by_read`, keyed "1.1x+8", and
+    `..._over_reads`): the two draws of where a person falls in the cells, taken at once."""
     point = None if choose_on is None else chosen_point(model, choose_on, view)
     figures = {name: evaluate_design(model, view, frames, point) for name, frames in sets.items()}
-    read_again(model, {f"{factor:g}": scaled_view(view, factor) for factor in jitter}, "scale", "1",
-               figures, sets, point)
-    read_again(model, {f"{columns:g}": dataclasses.replace(view, start_columns=view.start_columns + columns)
-                       for columns in rotations}, "rotation", "0", figures, sets, point)
+    if together:
+        read_again(model, {f"{factor:g}x+{columns:g}": turned_view(scaled_view(view, factor), columns)
+                           for factor in (1, *jitter) for columns in (0, *rotations)
+                           if (factor, columns) != (1, 0)}, "read", "1x+0", figures, sets, point)
+    else:
+        read_again(model, {f"{factor:g}": scaled_view(view, factor) for factor in jitter}, "scale", "1",
+                   figures, sets, point)
+        read_again(model, {f"{columns:g}": turned_view(view, columns) for columns in rotations},
+                   "rotation", "0", figures, sets, point)
     print(json.dumps({design: figures}), file=sys.stderr, flush=True)
     return figures
 
@@ -223,7 +238,7 @@ def markdown_table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
     ratio of the first set's plans."""
     sets = list(next(iter(results.values())))
     header = ["design", *[f"{s} AP50 / P" for s in sets], "renders AP_far / recall_nadir / mPE", "cost"]
-    kinds = [kind for kind in ("scales", "rotations")
+    kinds = [kind for kind in ("scales", "rotations", "reads")
              if any(f"AP50_over_{kind}" in by_set[s] for by_set in results.values() for s in sets)]
     header += [f"{s} AP50 over {kind}: mean [min, max] / P mean" for kind in kinds for s in sets]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
@@ -265,6 +280,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                              "further round (e.g. 4 8 12 16 20 24 28: the network's cells fall elsewhere "
                              "on every person, the scale unchanged), at the same point, and report AP50's "
                              "and precision's mean, min and max over them and 0")
+    parser.add_argument("--together", action="store_true",
+                        help="read every scale of --scale-jitter at every start of --rotate-jitter (each "
+                             "pair, 1 and 0 among them) and report the mean, min and max over all the "
+                             "reads, rather than over the scales and over the starts apart")
     parser.add_argument("--threads", type=int, default=2, help="inference threads (default 2)")
     parser.add_argument("--json", type=Path, default=None, help="where to write every figure")
     args = parser.parse_args(argv)
@@ -281,6 +300,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                              f"{args.scale_jitter}")
         if any(not 0 < columns < 2048 for columns in args.rotate_jitter):
             raise ValueError(f"--rotate-jitter columns must lie in (0, 2048), got {args.rotate_jitter}")
+        if args.together and not (args.scale_jitter and args.rotate_jitter):
+            raise ValueError("--together reads scales at starts: give --scale-jitter and --rotate-jitter")
     except (ModelError, DatasetFormatError, ValueError) as error:
         print(f"view_designs: {error}", file=sys.stderr)
         return 2
@@ -289,7 +310,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.design is not None and design not in args.design:
             continue
         results[design] = design_figures(design, model, view, sets, choose_on, args.scale_jitter,
-                                         args.rotate_jitter)
+                                         args.rotate_jitter, args.together)
     report(results, args.json)
     return 0
 

@@ -136,6 +136,24 @@ def test_rotate_jitter_reads_every_set_again_with_the_turn_started_further_round
     assert "--rotate-jitter" in capsys.readouterr().err
 
 
+def test_together_reads_every_scale_at_every_start(tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    model, figures, evaluated = read_jittered(tmp_path, "--scale-jitter", "0.9", "--rotate-jitter", "16",
+                                              "--together")
+    by_read = figures["AP50_by_read"]
+    assert list(by_read) == ["1x+0", "1x+16", "0.9x+0", "0.9x+16"] and by_read["1x+0"] == figures["AP50"]
+    assert "AP50_by_scale" not in figures and "AP50_by_rotation" not in figures
+    both = evaluated(dataclasses.replace(scaled_view(DESIGNS[JITTERED_DESIGN], 0.9), start_columns=16))
+    assert by_read["0.9x+16"] == both["AP50"] and figures["precision_by_read"]["0.9x+16"] == both["precision"]
+    assert figures["AP50_over_reads"]["mean"] == pytest.approx(sum(by_read.values()) / 4)
+    assert "samples AP50 over reads: mean [min, max] / P mean" in capsys.readouterr().out
+    # together wants both draws
+    samples = ROOT / "samples" / "annotations.json"
+    assert main(["--model", str(model), "--data", f"samples={samples}", "--scale-jitter", "0.9",
+                 "--together"]) == 2
+    assert "--together" in capsys.readouterr().err
+
+
 def test_a_fixed_strip_model_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     model = save_polar_double(tmp_path / "fixed.onnx")
     samples = ROOT / "samples" / "annotations.json"
