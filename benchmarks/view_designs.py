@@ -110,6 +110,9 @@ DESIGNS: dict[str, ViewPlanConfig] = {
 }
 FIGURES = ("AP50", "precision", "recall", "AP_far", "recall_nadir", "mPE", "mPE_reported")
 JITTERED = ("AP50", "precision")  # the figures `--scale-jitter` reads at every scale
+# the sizes of people (frame px: the square root of their box's along x across) by which the reads
+# count who is found in every read, in none or in some (`steadiness`)
+SIZES = {"small": (0.0, 48.0), "medium": (48.0, 96.0), "large": (96.0, math.inf)}
 
 
 def evaluate_design(model: ContractModel, view: ViewPlanConfig, frames: Sequence[Any],
@@ -118,13 +121,18 @@ def evaluate_design(model: ContractModel, view: ViewPlanConfig, frames: Sequence
     cost ratio of the plans (pixels against the trained strip); at `point` where given, else at
     the model's own point for each view's layout."""
     from detector.evaluate import RunnerPredictor, evaluate, frame_camera
+    from detector.people import FOUND, breakdown
 
-    metrics = evaluate(RunnerPredictor(ModelRunner(model, nms_iou=None if point is None else point.nms_iou,
-                                                   view=view)), frames,
-                       min_score=None if point is None else point.min_score).metrics
+    min_score = None if point is None else point.min_score
+    evaluation = evaluate(RunnerPredictor(ModelRunner(model, nms_iou=None if point is None else point.nms_iou,
+                                                      view=view)), frames, min_score=min_score)
+    metrics = evaluation.metrics
+    people, _ = breakdown(evaluation.frames, [str(frame.path) for frame in frames], min_score)
     costs = [view_plan(model.info, frame_camera(frame), view).cost_ratio for frame in frames]
     chosen = {} if point is None else {"min_score": point.min_score, "nms_iou": point.nms_iou}
-    return {**{k: metrics.get(k) for k in FIGURES}, "cost_ratio": sum(costs) / len(costs), **chosen}
+    return {**{k: metrics.get(k) for k in FIGURES}, "cost_ratio": sum(costs) / len(costs), **chosen,
+            "people_found": [person.outcome == FOUND for person in people],
+            "people_size_px": [math.sqrt(person.along_px * person.across_px) for person in people]}
 
 
 def read_sets(items: Sequence[str], limit: int | None) -> dict[str, list[Any]]:
@@ -180,7 +188,9 @@ def design_figures(design: str, model: ContractModel, view: ViewPlanConfig, sets
     again with every band's turn started that many columns further round (`start_columns`), the
     same as `..._by_rotation` (0 among them) and `..._over_rotations`. With `together`, every scale
     is read at every start instead, each pair once (`..._by_read`, keyed "1.1x+8", and
-    `..._over_reads`): the two draws of where a person falls in the cells, taken at once."""
+    `..._over_reads`): the two draws of where a person falls in the cells, taken at once. With any
+    reads again, each set's `people_over_reads` counts the people found in every read, in none and
+    in some (`steadiness`)."""
     point = None if choose_on is None else chosen_point(model, choose_on, view)
     figures = {name: evaluate_design(model, view, frames, point) for name, frames in sets.items()}
     if together:
@@ -192,8 +202,29 @@ def design_figures(design: str, model: ContractModel, view: ViewPlanConfig, sets
                    figures, sets, point)
         read_again(model, {f"{columns:g}": turned_view(view, columns) for columns in rotations},
                    "rotation", "0", figures, sets, point)
+    for by_set in figures.values():
+        reads, sizes = by_set.pop("people_found_by_read", None), by_set.pop("people_size_px")
+        del by_set["people_found"]
+        if reads is not None:
+            by_set["people_over_reads"] = steadiness(reads, sizes)
     print(json.dumps({design: figures}), file=sys.stderr, flush=True)
     return figures
+
+
+def steadiness(found_by_read: Sequence[Sequence[bool]], sizes_px: Sequence[float]
+               ) -> dict[str, dict[str, int]]:
+    """How many people were found (at IoU 0.5, at the point) in every read, in none and in some,
+    of all and of each of SIZES: which people the figures over the reads hinge on."""
+    counts = [sum(read[person] for read in found_by_read) for person in range(len(sizes_px))]
+    groups = {"all": (0.0, math.inf), **SIZES}
+    steady = {}
+    for group, (low, high) in groups.items():
+        chosen = [count for count, size in zip(counts, sizes_px, strict=True) if low <= size < high]
+        every = sum(count == len(found_by_read) for count in chosen)
+        never = sum(count == 0 for count in chosen)
+        steady[group] = {"people": len(chosen), "every_read": every, "no_read": never,
+                         "some_reads": len(chosen) - every - never}
+    return steady
 
 
 def read_again(model: ContractModel, variants: dict[str, ViewPlanConfig], kind: str, served: str,
@@ -209,6 +240,8 @@ def read_again(model: ContractModel, variants: dict[str, ViewPlanConfig], kind: 
             read = evaluate_design(model, view, frames, point)
             for key in JITTERED:
                 figures[name].setdefault(f"{key}_by_{kind}", {served: figures[name][key]})[label] = read[key]
+            figures[name].setdefault("people_found_by_read", [figures[name]["people_found"]]).append(
+                read["people_found"])
     for by_set in figures.values():
         for key in JITTERED:
             values = list(by_set[f"{key}_by_{kind}"].values())
@@ -232,6 +265,13 @@ def over_reads(summary: dict[str, float] | None) -> str:
         f"{cell(summary['mean'])} [{cell(summary['min'])}, {cell(summary['max'])}]")
 
 
+def steady_cell(steady: dict[str, dict[str, int]] | None) -> str:
+    if steady is None:
+        return "–"
+    every = steady["all"]
+    return f"{every['every_read']} / {every['no_read']} / {every['some_reads']} of {every['people']}"
+
+
 def markdown_table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
     """Designs as rows (with the operating point each was chosen, where it was); per set AP50 /
     precision (and AP_far, recall_nadir, mPE where the set has floor positions), and the cost
@@ -241,6 +281,8 @@ def markdown_table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
     kinds = [kind for kind in ("scales", "rotations", "reads")
              if any(f"AP50_over_{kind}" in by_set[s] for by_set in results.values() for s in sets)]
     header += [f"{s} AP50 over {kind}: mean [min, max] / P mean" for kind in kinds for s in sets]
+    if kinds:
+        header += [f"{s} people found in every / no / some read" for s in sets]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for design, by_set in results.items():
         first = by_set[sets[0]]
@@ -254,6 +296,8 @@ def markdown_table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
         cells += [f"{over_reads(by_set[s].get(f'AP50_over_{kind}'))} / "
                   f"{cell((by_set[s].get(f'precision_over_{kind}') or {}).get('mean'))}"
                   for kind in kinds for s in sets]
+        if kinds:
+            cells += [steady_cell(by_set[s].get("people_over_reads")) for s in sets]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

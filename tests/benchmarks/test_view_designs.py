@@ -15,7 +15,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "contract"))
 
 from polar_double import save_polar_double
 
-from benchmarks.view_designs import DESIGNS, evaluate_design, main, markdown_table, scaled_view
+from benchmarks.view_designs import (
+    DESIGNS,
+    SIZES,
+    evaluate_design,
+    main,
+    markdown_table,
+    scaled_view,
+    steadiness,
+    turned_view,
+)
 from fisheye import load_camera
 from fisheye.view_plan import ViewPlanConfig, plan_view
 
@@ -146,12 +155,30 @@ def test_together_reads_every_scale_at_every_start(tmp_path: Path,
     both = evaluated(dataclasses.replace(scaled_view(DESIGNS[JITTERED_DESIGN], 0.9), start_columns=16))
     assert by_read["0.9x+16"] == both["AP50"] and figures["precision_by_read"]["0.9x+16"] == both["precision"]
     assert figures["AP50_over_reads"]["mean"] == pytest.approx(sum(by_read.values()) / 4)
+    # who was found in every read, in none, in some
+    design = DESIGNS[JITTERED_DESIGN]
+    reads = [evaluated(turned_view(scaled_view(design, factor), columns))["people_found"]
+             for factor in (1, 0.9) for columns in (0, 16)]
+    people = figures["people_over_reads"]["all"]
+    assert people["people"] == len(reads[0]) > 0
+    assert people["every_read"] == sum(all(read[i] for read in reads) for i in range(len(reads[0])))
+    assert people["no_read"] == sum(not any(read[i] for read in reads) for i in range(len(reads[0])))
+    assert people["every_read"] + people["no_read"] + people["some_reads"] == people["people"]
+    assert sum(figures["people_over_reads"][size]["people"] for size in SIZES) == people["people"]
     assert "samples AP50 over reads: mean [min, max] / P mean" in capsys.readouterr().out
     # together wants both draws
     samples = ROOT / "samples" / "annotations.json"
     assert main(["--model", str(model), "--data", f"samples={samples}", "--scale-jitter", "0.9",
                  "--together"]) == 2
     assert "--together" in capsys.readouterr().err
+
+
+def test_steadiness_counts_who_each_read_found_by_size() -> None:
+    # three people, small, medium and large, over two reads: found in both, in neither, in one
+    steady = steadiness([[True, False, True], [True, False, False]], [30.0, 60.0, 120.0])
+    assert steady["all"] == {"people": 3, "every_read": 1, "no_read": 1, "some_reads": 1}
+    assert steady["small"] == {"people": 1, "every_read": 1, "no_read": 0, "some_reads": 0}
+    assert steady["medium"]["no_read"] == 1 and steady["large"]["some_reads"] == 1
 
 
 def test_a_fixed_strip_model_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
