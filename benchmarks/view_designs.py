@@ -268,14 +268,15 @@ def over_reads(summary: dict[str, float] | None) -> str:
 def steady_cell(steady: dict[str, dict[str, int]] | None) -> str:
     if steady is None:
         return "–"
-    every = steady["all"]
-    return f"{every['every_read']} / {every['no_read']} / {every['some_reads']} of {every['people']}"
+    counts = steady["all"]
+    return f"{counts['every_read']} / {counts['no_read']} / {counts['some_reads']} of {counts['people']}"
 
 
 def markdown_table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
     """Designs as rows (with the operating point each was chosen, where it was); per set AP50 /
     precision (and AP_far, recall_nadir, mPE where the set has floor positions), and the cost
-    ratio of the first set's plans."""
+    ratio of the first set's plans; where sets were read again, the figures over the reads and the
+    people found in every read, in none and in some."""
     sets = list(next(iter(results.values())))
     header = ["design", *[f"{s} AP50 / P" for s in sets], "renders AP_far / recall_nadir / mPE", "cost"]
     kinds = [kind for kind in ("scales", "rotations", "reads")
