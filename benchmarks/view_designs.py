@@ -110,9 +110,6 @@ DESIGNS: dict[str, ViewPlanConfig] = {
 }
 FIGURES = ("AP50", "precision", "recall", "AP_far", "recall_nadir", "mPE", "mPE_reported")
 JITTERED = ("AP50", "precision")  # the figures `--scale-jitter` reads at every scale
-# the sizes of people (frame px: the square root of their box's along x across) by which the reads
-# count who is found in every read, in none or in some (`steadiness`)
-SIZES = {"small": (0.0, 48.0), "medium": (48.0, 96.0), "large": (96.0, math.inf)}
 
 
 def evaluate_design(model: ContractModel, view: ViewPlanConfig, frames: Sequence[Any],
@@ -121,7 +118,7 @@ def evaluate_design(model: ContractModel, view: ViewPlanConfig, frames: Sequence
     cost ratio of the plans (pixels against the trained strip); at `point` where given, else at
     the model's own point for each view's layout."""
     from detector.evaluate import RunnerPredictor, evaluate, frame_camera
-    from detector.people import FOUND, breakdown
+    from detector.people import FOUND, breakdown, size_px
 
     min_score = None if point is None else point.min_score
     evaluation = evaluate(RunnerPredictor(ModelRunner(model, nms_iou=None if point is None else point.nms_iou,
@@ -132,7 +129,7 @@ def evaluate_design(model: ContractModel, view: ViewPlanConfig, frames: Sequence
     chosen = {} if point is None else {"min_score": point.min_score, "nms_iou": point.nms_iou}
     return {**{k: metrics.get(k) for k in FIGURES}, "cost_ratio": sum(costs) / len(costs), **chosen,
             "people_found": [person.outcome == FOUND for person in people],
-            "people_size_px": [math.sqrt(person.along_px * person.across_px) for person in people]}
+            "people_size_px": [size_px(person) for person in people]}
 
 
 def read_sets(items: Sequence[str], limit: int | None) -> dict[str, list[Any]]:
@@ -214,7 +211,10 @@ def design_figures(design: str, model: ContractModel, view: ViewPlanConfig, sets
 def steadiness(found_by_read: Sequence[Sequence[bool]], sizes_px: Sequence[float]
                ) -> dict[str, dict[str, int]]:
     """How many people were found (at IoU 0.5, at the point) in every read, in none and in some,
-    of all and of each of SIZES: which people the figures over the reads hinge on."""
+    of all and of each size (`detector.people.SIZES`): which people the figures over the reads
+    hinge on."""
+    from detector.people import SIZES
+
     counts = [sum(read[person] for read in found_by_read) for person in range(len(sizes_px))]
     groups = {"all": (0.0, math.inf), **SIZES}
     steady = {}

@@ -263,7 +263,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--people", default=None, metavar="CSV",
                         help="write each annotated person's outcome here (found, low_score, loose_box, "
                              "missed; where they stand, the best detection's IoU, score and box), and "
-                             "the counts by ring and frame into the JSON's 'people'")
+                             "the counts by ring, size and frame into the JSON's 'people'")
     parser.add_argument("--false-positives", default=None, metavar="CSV",
                         help="write each false positive at the threshold here (duplicate, loose, "
                              "background; where, score, box, best IoU), and the counts into 'people'")

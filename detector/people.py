@@ -12,6 +12,7 @@ same top detections AP counts; detections on crowd boxes count neither way.
 from __future__ import annotations
 
 import csv
+import math
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
@@ -34,6 +35,9 @@ FALSE_POSITIVES = (DUPLICATE, LOOSE, BACKGROUND)
 LOOSE_IOU = 0.3
 # rings of the image circle's radius the summary counts by: below the lens, the middle, the rim
 RINGS = {"nadir": (0.0, NADIR_FRACTION), "middle": (NADIR_FRACTION, 0.7), "rim": (0.7, np.inf)}
+# sizes of people and of false positives' boxes the summary counts by (`size_px`): under 48 px,
+# the rim's people of a 1 MP frame, whom a view too small for them loses
+SIZES = {"small": (0.0, 48.0), "medium": (48.0, 96.0), "large": (96.0, np.inf)}
 
 
 @dataclass(frozen=True)
@@ -169,15 +173,23 @@ def breakdown(frames: Sequence[EvalFrame], names: Sequence[str], min_score: floa
     return outcomes, errors
 
 
+def size_px(row: PersonOutcome | FalsePositive) -> float:
+    """A person's or a false positive's size in frame px: the square root of its box's along x across."""
+    return math.sqrt(row.along_px * row.across_px)
+
+
 def summarise_outcomes(rows: Sequence[PersonOutcome], errors: Sequence[FalsePositive] = ()
                        ) -> dict[str, dict[str, int]]:
     """Counts of each outcome and each kind of false positive: overall (`all`), by ring of the
-    image circle (`ring:nadir`, ... of RINGS; frames without a camera in none) and by frame
-    (`frame:NAME`)."""
+    image circle (`ring:nadir`, ... of RINGS; frames without a camera in none), by size
+    (`size:small`, ... of SIZES, `size_px`) and by frame (`frame:NAME`)."""
     groups: dict[str, tuple[list[PersonOutcome], list[FalsePositive]]] = {"all": (list(rows), list(errors))}
     for ring, (low, high) in RINGS.items():
         groups[f"ring:{ring}"] = ([r for r in rows if low <= r.radius_fraction < high],
                                   [e for e in errors if low <= e.radius_fraction < high])
+    for size, (low, high) in SIZES.items():
+        groups[f"size:{size}"] = ([r for r in rows if low <= size_px(r) < high],
+                                  [e for e in errors if low <= size_px(e) < high])
     for name in dict.fromkeys([r.frame for r in rows] + [e.frame for e in errors]):
         groups[f"frame:{name}"] = ([r for r in rows if r.frame == name],
                                    [e for e in errors if e.frame == name])

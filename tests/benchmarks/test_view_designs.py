@@ -17,7 +17,6 @@ from polar_double import save_polar_double
 
 from benchmarks.view_designs import (
     DESIGNS,
-    SIZES,
     evaluate_design,
     main,
     markdown_table,
@@ -25,6 +24,7 @@ from benchmarks.view_designs import (
     steadiness,
     turned_view,
 )
+from detector.people import SIZES
 from fisheye import load_camera
 from fisheye.view_plan import ViewPlanConfig, plan_view
 

@@ -130,8 +130,14 @@ def test_summary_by_ring_and_frame_and_the_csv(tmp_path: Path) -> None:
     assert summary["frame:a"]["people"] == 3 and summary["frame:b"] == {
         "people": 1, FOUND: 0, LOW_SCORE: 0, LOOSE_BOX: 0, MISSED: 1,
         "false_positives": 1, DUPLICATE: 0, LOOSE: 0, BACKGROUND: 1}
+    # every person here is 20 x 40 px (28 px): small; so are both false positives (20 x 100, 20 x 40)
+    assert summary["size:small"]["people"] == 4 and summary["size:small"]["false_positives"] == 2
+    assert summary["size:medium"]["people"] == summary["size:large"]["false_positives"] == 0
+    large = summarise_outcomes(breakdown([_frame([[199.5, 99.5, 80.0, 160.0]], [], [])], ["c"])[0])
+    assert large["size:large"][MISSED] == 1 and large["size:small"]["people"] == 0  # 113 px
     empty = summarise_outcomes([])
-    assert list(empty) == ["all", "ring:nadir", "ring:middle", "ring:rim"]
+    assert list(empty) == ["all", "ring:nadir", "ring:middle", "ring:rim", "size:small", "size:medium",
+                           "size:large"]
     assert all(count == 0 for counts in empty.values() for count in counts.values())
     fp_path = tmp_path / "fp.csv"
     write_rows_csv(errors, fp_path, FalsePositive)
