@@ -38,6 +38,7 @@ import json
 import math
 import sys
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -109,7 +110,17 @@ DESIGNS: dict[str, ViewPlanConfig] = {
        for way, keep in (("no nadir view (the rule)", None), ("nadir view beside a smaller strip", 0.5))},
 }
 FIGURES = ("AP50", "precision", "recall", "AP_far", "recall_nadir", "mPE", "mPE_reported")
-JITTERED = ("AP50", "precision")  # the figures `--scale-jitter` reads at every scale
+JITTERED = ("AP50", "precision")  # the figures kept of every read again (`read_again`)
+
+
+@dataclass(frozen=True)
+class Read:
+    """One read of a set: `evaluate_design`'s figures and, where asked, whether each person was
+    found at the point (`found`, the frames' people in order) and their sizes (`detector.people.size_px`)."""
+
+    figures: dict[str, Any]
+    found: list[bool]
+    sizes_px: list[float]
 
 
 def evaluate_design(model: ContractModel, view: ViewPlanConfig, frames: Sequence[Any],
@@ -117,6 +128,12 @@ def evaluate_design(model: ContractModel, view: ViewPlanConfig, frames: Sequence
     """`fishloc eval`'s metrics of `model` on `frames` with views planned by `view`, and the mean
     cost ratio of the plans (pixels against the trained strip); at `point` where given, else at
     the model's own point for each view's layout."""
+    return read_design(model, view, frames, point).figures
+
+
+def read_design(model: ContractModel, view: ViewPlanConfig, frames: Sequence[Any],
+                point: OperatingPoint | None = None, people: bool = False) -> Read:
+    """`evaluate_design`'s read, with each person's outcome where `people` (empty otherwise)."""
     from detector.evaluate import RunnerPredictor, evaluate, frame_camera
     from detector.people import FOUND, breakdown, size_px
 
@@ -124,12 +141,13 @@ def evaluate_design(model: ContractModel, view: ViewPlanConfig, frames: Sequence
     evaluation = evaluate(RunnerPredictor(ModelRunner(model, nms_iou=None if point is None else point.nms_iou,
                                                       view=view)), frames, min_score=min_score)
     metrics = evaluation.metrics
-    people, _ = breakdown(evaluation.frames, [str(frame.path) for frame in frames], min_score)
     costs = [view_plan(model.info, frame_camera(frame), view).cost_ratio for frame in frames]
     chosen = {} if point is None else {"min_score": point.min_score, "nms_iou": point.nms_iou}
-    return {**{k: metrics.get(k) for k in FIGURES}, "cost_ratio": sum(costs) / len(costs), **chosen,
-            "people_found": [person.outcome == FOUND for person in people],
-            "people_size_px": [size_px(person) for person in people]}
+    figures = {**{k: metrics.get(k) for k in FIGURES}, "cost_ratio": sum(costs) / len(costs), **chosen}
+    names = [str(frame.path) for frame in frames]
+    persons = breakdown(evaluation.frames, names, min_score)[0] if people else []
+    return Read(figures, [person.outcome == FOUND for person in persons],
+                [size_px(person) for person in persons])
 
 
 def read_sets(items: Sequence[str], limit: int | None) -> dict[str, list[Any]]:
@@ -189,21 +207,22 @@ def design_figures(design: str, model: ContractModel, view: ViewPlanConfig, sets
     reads again, each set's `people_over_reads` counts the people found in every read, in none and
     in some (`steadiness`)."""
     point = None if choose_on is None else chosen_point(model, choose_on, view)
-    figures = {name: evaluate_design(model, view, frames, point) for name, frames in sets.items()}
+    people = bool(jitter or rotations)
+    served = {name: read_design(model, view, frames, point, people) for name, frames in sets.items()}
+    figures = {name: read.figures for name, read in served.items()}
+    found = {name: [read.found] for name, read in served.items()}
     if together:
         read_again(model, {f"{factor:g}x+{columns:g}": turned_view(scaled_view(view, factor), columns)
                            for factor in (1, *jitter) for columns in (0, *rotations)
-                           if (factor, columns) != (1, 0)}, "read", "1x+0", figures, sets, point)
+                           if (factor, columns) != (1, 0)}, "read", "1x+0", figures, found, sets, point)
     else:
         read_again(model, {f"{factor:g}": scaled_view(view, factor) for factor in jitter}, "scale", "1",
-                   figures, sets, point)
+                   figures, found, sets, point)
         read_again(model, {f"{columns:g}": turned_view(view, columns) for columns in rotations},
-                   "rotation", "0", figures, sets, point)
-    for by_set in figures.values():
-        reads, sizes = by_set.pop("people_found_by_read", None), by_set.pop("people_size_px")
-        del by_set["people_found"]
-        if reads is not None:
-            by_set["people_over_reads"] = steadiness(reads, sizes)
+                   "rotation", "0", figures, found, sets, point)
+    if people:
+        for name, read in served.items():
+            figures[name]["people_over_reads"] = steadiness(found[name], read.sizes_px)
     print(json.dumps({design: figures}), file=sys.stderr, flush=True)
     return figures
 
@@ -228,20 +247,20 @@ def steadiness(found_by_read: Sequence[Sequence[bool]], sizes_px: Sequence[float
 
 
 def read_again(model: ContractModel, variants: dict[str, ViewPlanConfig], kind: str, served: str,
-               figures: dict[str, dict[str, Any]], sets: dict[str, list[Any]], point: OperatingPoint | None
-               ) -> None:
+               figures: dict[str, dict[str, Any]], found: dict[str, list[list[bool]]],
+               sets: dict[str, list[Any]], point: OperatingPoint | None) -> None:
     """Every set read with each variant of the view at `point`: the JITTERED figures of each, by
     label, beside the served read's (`served`), into `figures[set]["<figure>_by_<kind>"]`, and
-    their mean, min and max into `"<figure>_over_<kind>s"`."""
+    their mean, min and max into `"<figure>_over_<kind>s"`; who each read found onto `found[set]`."""
     if not variants:
         return
     for label, view in variants.items():
         for name, frames in sets.items():
-            read = evaluate_design(model, view, frames, point)
+            read = read_design(model, view, frames, point, people=True)
             for key in JITTERED:
-                figures[name].setdefault(f"{key}_by_{kind}", {served: figures[name][key]})[label] = read[key]
-            figures[name].setdefault("people_found_by_read", [figures[name]["people_found"]]).append(
-                read["people_found"])
+                by_label = figures[name].setdefault(f"{key}_by_{kind}", {served: figures[name][key]})
+                by_label[label] = read.figures[key]
+            found[name].append(read.found)
     for by_set in figures.values():
         for key in JITTERED:
             values = list(by_set[f"{key}_by_{kind}"].values())

@@ -17,9 +17,10 @@ from polar_double import save_polar_double
 
 from benchmarks.view_designs import (
     DESIGNS,
-    evaluate_design,
+    Read,
     main,
     markdown_table,
+    read_design,
     scaled_view,
     steadiness,
     turned_view,
@@ -93,9 +94,9 @@ JITTERED_DESIGN = "strip + nadir view 0.35 at 1.25x"
 
 
 def read_jittered(tmp_path: Path, *jitter: str
-                  ) -> tuple[Path, dict[str, Any], Callable[[ViewPlanConfig], Any]]:
+                  ) -> tuple[Path, dict[str, Any], Callable[[ViewPlanConfig], Read]]:
     """The toy planned model, its figures on two sample frames read with `jitter`'s options, and
-    `evaluate_design` of a view of it on the same frames."""
+    `read_design` of a view of it on the same frames, with who it found."""
     from contract import OnnxModel, SessionThreads
     from detector.data.readers import read_dataset
 
@@ -107,7 +108,7 @@ def read_jittered(tmp_path: Path, *jitter: str
     onnx = OnnxModel(model, SessionThreads(intra_op=1))
     frames = read_dataset(samples)[:2]
     return model, json.loads(out.read_text())[JITTERED_DESIGN]["samples"], (
-        lambda view: evaluate_design(onnx, view, frames))
+        lambda view: read_design(onnx, view, frames, people=True))
 
 
 def test_scale_jitter_reads_every_set_again_at_each_factor(tmp_path: Path,
@@ -115,7 +116,7 @@ def test_scale_jitter_reads_every_set_again_at_each_factor(tmp_path: Path,
     model, figures, evaluated = read_jittered(tmp_path, "--scale-jitter", "0.9", "1.1")
     by_scale = figures["AP50_by_scale"]
     assert list(by_scale) == ["1", "0.9", "1.1"] and by_scale["1"] == figures["AP50"]
-    read = evaluated(scaled_view(DESIGNS[JITTERED_DESIGN], 0.9))
+    read = evaluated(scaled_view(DESIGNS[JITTERED_DESIGN], 0.9)).figures
     assert by_scale["0.9"] == read["AP50"] and figures["precision_by_scale"]["0.9"] == read["precision"]
     assert figures["precision_by_scale"]["1"] == figures["precision"]
     summary = figures["AP50_over_scales"]
@@ -134,7 +135,7 @@ def test_rotate_jitter_reads_every_set_again_with_the_turn_started_further_round
     model, figures, evaluated = read_jittered(tmp_path, "--rotate-jitter", "8", "16")
     assert list(figures["AP50_by_rotation"]) == ["0", "8", "16"]
     assert figures["AP50_by_rotation"]["0"] == figures["AP50"] and "AP50_by_scale" not in figures
-    read = evaluated(dataclasses.replace(DESIGNS[JITTERED_DESIGN], start_columns=16))
+    read = evaluated(dataclasses.replace(DESIGNS[JITTERED_DESIGN], start_columns=16)).figures
     assert figures["AP50_by_rotation"]["16"] == read["AP50"]
     assert figures["precision_by_rotation"]["16"] == read["precision"]
     summary = figures["precision_over_rotations"]
@@ -152,12 +153,12 @@ def test_together_reads_every_scale_at_every_start(tmp_path: Path,
     by_read = figures["AP50_by_read"]
     assert list(by_read) == ["1x+0", "1x+16", "0.9x+0", "0.9x+16"] and by_read["1x+0"] == figures["AP50"]
     assert "AP50_by_scale" not in figures and "AP50_by_rotation" not in figures
-    both = evaluated(dataclasses.replace(scaled_view(DESIGNS[JITTERED_DESIGN], 0.9), start_columns=16))
+    both = evaluated(turned_view(scaled_view(DESIGNS[JITTERED_DESIGN], 0.9), 16)).figures
     assert by_read["0.9x+16"] == both["AP50"] and figures["precision_by_read"]["0.9x+16"] == both["precision"]
     assert figures["AP50_over_reads"]["mean"] == pytest.approx(sum(by_read.values()) / 4)
     # who was found in every read, in none, in some
     design = DESIGNS[JITTERED_DESIGN]
-    reads = [evaluated(turned_view(scaled_view(design, factor), columns))["people_found"]
+    reads = [evaluated(turned_view(scaled_view(design, factor), columns)).found
              for factor in (1, 0.9) for columns in (0, 16)]
     people = figures["people_over_reads"]["all"]
     assert people["people"] == len(reads[0]) > 0
