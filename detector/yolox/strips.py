@@ -32,12 +32,13 @@ from torch import Tensor
 
 from contract import ModelInfo
 from contract.detect import reduce_like_decode
-from contract.views import min_decoded_side, polar_grid, prepare_input
+from contract.views import min_decoded_side, nadir_input, polar_grid, prepare_input, view_plan
 from detector.data.dataset import load_rgb
 from detector.data.readers import FrameAnnotations
 from detector.yolox.foot import strip_feet
 from detector.yolox.polar import EDGE_TO_CENTRE_PX, PolarDetectorConfig
 from fisheye.polar import PolarGrid
+from fisheye.view_plan import NadirPiece
 
 FloatArray = NDArray[np.float64]
 log = logging.getLogger(__name__)
@@ -74,8 +75,17 @@ class StripAugment:
     # `ViewPlanConfig.unwrap_samples` serves it (docs/DETECTOR.md, "Other runtimes and an
     # area-averaged unwrap"); 1: one bilinear sample, as the service's default view.
     unwrap_samples: int = 1
+    # The probability that a sample is the frame's nadir view (`fisheye.view_plan.NadirPiece`, as
+    # the default view plans it for the frame's camera) rather than a strip: the upright crop of the
+    # disc below the lens the service runs as a second input, which a head trained on strips alone
+    # reads zero-shot. Its labels are the upright boxes `contract.views.upright_to_radius_aligned`
+    # turns back into each person's box (`nadir_labels`); its people have no foot labels (the
+    # service takes their feet from the box). 0 (the default): strips alone.
+    nadir_view: float = 0.0
 
     def __post_init__(self) -> None:
+        if not 0.0 <= self.nadir_view <= 1.0:
+            raise ValueError(f"nadir_view must lie in [0, 1], got {self.nadir_view}")
         if not self.radius_scales or min(self.radius_scales) <= 0:
             raise ValueError(f"radius_scales must be positive, got {self.radius_scales}")
         if not self.band_scales or min(self.band_scales) < 0.5:
@@ -277,6 +287,63 @@ def photometric(image: NDArray[np.uint8], augment: Photometric, rng: np.random.G
     return np.asarray(out, dtype=np.uint8)
 
 
+def nadir_labels(nadir: NadirPiece, cxcywh: FloatArray) -> FloatArray:
+    """(N, 4) radius-aligned frame boxes (cx, cy, across, along) -> (N, 4) upright `xyxy` boxes of
+    the nadir view (its own px, pixel centres): each bounds the ellipse its person's box holds, the
+    box `contract.views.upright_to_radius_aligned` reads back as that person's (exactly on the
+    image axes and for a round person; on a diagonal ray the box is square and reads back round,
+    as the service reads any upright box there)."""
+    boxes = np.asarray(cxcywh, dtype=np.float64).reshape(-1, 4)
+    angle = np.arctan2(boxes[:, 1] - nadir.centre_px[1], boxes[:, 0] - nadir.centre_px[0])
+    along, across = boxes[:, 3] / 2, boxes[:, 2] / 2
+    half = np.stack([np.hypot(along * np.cos(angle), across * np.sin(angle)),
+                     np.hypot(along * np.sin(angle), across * np.cos(angle))], axis=1) * nadir.scale
+    corner = np.asarray(nadir.centre_px, dtype=np.float64) - nadir.half_px
+    centre = (boxes[:, :2] - corner) * nadir.scale - 0.5
+    return np.concatenate([centre - half, centre + half], axis=1)
+
+
+def frame_nadir(frame: FrameAnnotations, info: ModelInfo) -> tuple[NDArray[np.uint8], FloatArray] | None:
+    """A frame's nadir view as the default view plans it for its camera (decoded as the service
+    decodes it) and its labels (N, 4) upright px (`nadir_labels`, kept as `visible_labels` keeps
+    them); None where the plan has no nadir view."""
+    if frame.camera is None:
+        raise ValueError(f"{frame.path}: the nadir view needs the frame's camera")
+    nadir = view_plan(info, frame.camera).nadir
+    if nadir is None:
+        return None
+    reduced = reduce_like_decode(load_rgb(frame), min_decoded_side(info, frame.camera))
+    image = nadir_input(nadir, reduced, frame.camera.image_size, info.pad_value)
+    clipped, keep = visible_labels(nadir_labels(nadir, frame.boxes_cxcywh), (nadir.side, nadir.side))
+    return image, clipped[keep]
+
+
+def turn_square(image: NDArray[np.uint8], labels: FloatArray, quarters: int, flip: bool
+                ) -> tuple[NDArray[np.uint8], FloatArray]:
+    """A square upright view (S, S, 3) turned `quarters` × 90° counter-clockwise as displayed, then
+    mirrored left-right where `flip`, with its upright labels (N, 4) (pixel centres) alike."""
+    last = image.shape[0] - 1
+    for _ in range(quarters % 4):  # (x, y) -> (y, last - x): np.rot90's counter-clockwise turn
+        image = np.rot90(image)
+        x1, y1, x2, y2 = labels.T
+        labels = np.stack([y1, last - x2, y2, last - x1], axis=1)
+    if flip:
+        image = image[:, ::-1]
+        x1, y1, x2, y2 = labels.T
+        labels = np.stack([last - x2, y1, last - x1, y2], axis=1)
+    return np.ascontiguousarray(image), labels
+
+
+def pad_to(image: NDArray[np.uint8], height: int, width: int, pad_value: int) -> NDArray[np.uint8]:
+    """An image (H, W, 3) padded below and right to `height` × `width` (a batch's size); ValueError
+    where it is larger."""
+    if image.shape[0] > height or image.shape[1] > width:
+        raise ValueError(f"a {image.shape[1]} x {image.shape[0]} px view does not fit {width} x {height}")
+    out = np.full((height, width, 3), pad_value, dtype=image.dtype)
+    out[:image.shape[0], :image.shape[1]] = image
+    return out
+
+
 @dataclass(frozen=True)
 class StripSample:
     """One strip: `image` (H, W, 3) uint8 RGB, `labels_xyxy` (N, 4) YOLOX coordinates (edge px)
@@ -317,6 +384,7 @@ class PolarStripDataset:
         self.epoch = 0
         self._strips: dict[tuple[int, float, float], tuple[NDArray[np.uint8], FloatArray, FloatArray]] = {}
         self._counted: set[tuple[int, float, float]] = set()
+        self._nadirs: dict[int, tuple[NDArray[np.uint8], FloatArray] | None] = {}
         self.full_turns_left_out = 0
 
     def set_epoch(self, epoch: int) -> None:
@@ -349,8 +417,32 @@ class PolarStripDataset:
             self._strips[key] = (strip, xyxy, feet)
         return strip, xyxy, feet
 
+    def nadir(self, index: int) -> tuple[NDArray[np.uint8], FloatArray] | None:
+        """The frame's nadir view and its upright labels (`frame_nadir`), cached (a 384 px view is
+        under 0.5 MB)."""
+        if index not in self._nadirs:
+            self._nadirs[index] = frame_nadir(self.frames[index], self.info)
+        return self._nadirs[index]
+
+    def nadir_sample(self, index: int, rng: np.random.Generator) -> StripSample | None:
+        """The frame's nadir view turned by a random quarter and mirrored at random, photometric
+        noise as a strip's, padded to the strips' size (their rows, and `crop_width` columns or the
+        whole strip's); None where the frame's plan has no nadir view."""
+        found = self.nadir(index)
+        if found is None:
+            return None
+        image, labels = turn_square(*found, int(rng.integers(4)), bool(rng.random() < self.augment.flip))
+        width = self.augment.crop_width or self.config.polar_width + self.config.polar_overlap
+        image = photometric(image, self.augment, rng)
+        image = pad_to(image, self.config.input_size, width, self.info.pad_value)
+        return StripSample(image, labels + EDGE_TO_CENTRE_PX, np.full((len(labels), 3), np.nan))
+
     def __getitem__(self, index: int) -> StripSample:
         rng = np.random.default_rng((self.seed, self.epoch, index))
+        if self.augment.nadir_view and rng.random() < self.augment.nadir_view:
+            sample = self.nadir_sample(index, rng)
+            if sample is not None:
+                return sample
         scales = self.augment.radius_scales
         scale = scales[int(rng.integers(len(scales)))] if len(scales) > 1 else scales[0]
         bands = self.augment.band_scales

@@ -334,10 +334,11 @@ def test_cli_adds_the_foot_to_a_polar_checkpoint(
     save_checkpoint(start, Checkpoint(plain, network.state_dict(), ModelInfo("s", "toy", 0.4), {}))
     data = toy_dataset(count=2, size=128, people=2)
     out = tmp_path / "foot"
-    # --zoom draws each sample's strip radius: an augmentation, which a checkpoint's strip allows
+    # --zoom draws each sample's strip radius: an augmentation, which a checkpoint's strip allows;
+    # --nadir-view mixes in nadir views, whose people have no foot labels
     args = ["train", "--init-from", str(start), "--foot", "--data", str(data), "--out", str(out), "--quiet",
             "--threads", "1", "--epochs", "1", "--batch-size", "2", "--distill", "0", "--zoom", "1", "1.5",
-            "--freeze", *FROZEN]
+            "--nadir-view", "0.5", "--freeze", *FROZEN]
     assert main(args) == 0
     trained = load_checkpoint(out / "last.pt")
     assert trained.config == CONFIG

@@ -13,7 +13,7 @@ import pytest
 import torch
 from onnx import TensorProto, helper
 
-from contract.views import polar_grid
+from contract.views import nadir_input, polar_grid, upright_to_radius_aligned, view_plan
 from detector.checkpoint import Checkpoint, load_checkpoint, save_checkpoint, save_release
 from detector.data.dataset import load_rgb
 from detector.data.readers import FrameAnnotations, read_dataset
@@ -26,11 +26,15 @@ from detector.yolox.strips import (
     PolarStripDataset,
     StripAugment,
     collate_strips,
+    frame_nadir,
     frame_strip,
+    nadir_labels,
     place_labels,
     roll_strip,
     training_info,
+    turn_square,
 )
+from fisheye.view_plan import NadirPiece
 from models import ASSETS_DIR
 from service.cli import main
 
@@ -146,6 +150,59 @@ def test_a_band_scale_strip_is_the_band_of_a_planned_view(toy_dataset: Callable[
     assert np.all(sample.image[rows:] == info.pad_value) and not np.all(sample.image[:rows] == info.pad_value)
     with pytest.raises(ValueError, match="band_scales"):
         StripAugment(band_scales=(0.4,))
+
+
+def test_nadir_labels_read_back_as_each_persons_box() -> None:
+    nadir = NadirPiece(centre_px=(500.0, 400.0), half_px=150.0, side=384, column=0, owned_px=80.0)
+    # across, along: on the image's axes the ellipse's upright box reads back exactly
+    on_axes = np.array([[560.0, 400.0, 30.0, 70.0], [500.0, 330.0, 40.0, 60.0], [420.0, 400.0, 50.0, 50.0]])
+    np.testing.assert_allclose(upright_to_radius_aligned(nadir, nadir_labels(nadir, on_axes)), on_axes,
+                               atol=1e-9)
+    # the first, 60 px right of the centre: 70 along the ray (x), 30 across, 1.28 input px a px
+    centre, half = np.array([210.0, 150.0]) * 1.28 - 0.5, np.array([35.0, 15.0]) * 1.28
+    np.testing.assert_allclose(nadir_labels(nadir, on_axes)[0], [*(centre - half), *(centre + half)])
+    # on a diagonal ray the upright box is a square: the service reads it back about the same
+    # centre as a round person of the ellipse's mean square axis, and a round person exactly
+    diagonal = np.array([[560.0, 460.0, 30.0, 70.0], [450.0, 350.0, 40.0, 40.0]])
+    back = upright_to_radius_aligned(nadir, nadir_labels(nadir, diagonal))
+    np.testing.assert_allclose(back[:, :2], diagonal[:, :2], atol=1e-9)
+    np.testing.assert_allclose(back[0, 2:], 2 * math.sqrt((35 ** 2 + 15 ** 2) / 2), atol=1e-9)
+    np.testing.assert_allclose(back[1], diagonal[1], atol=1e-9)
+
+
+@pytest.mark.parametrize("quarters", [0, 1, 2, 3])
+@pytest.mark.parametrize("flip", [False, True])
+def test_a_turned_square_keeps_each_label_on_its_person(quarters: int, flip: bool) -> None:
+    image = np.zeros((32, 32, 3), np.uint8)
+    image[4:10, 20:30] = 255  # a person at x 20-29, y 4-9 (pixel centres)
+    turned, labels = turn_square(image, np.array([[20.0, 4.0, 29.0, 9.0]]), quarters, flip)
+    ys, xs = np.nonzero(turned[..., 0])
+    np.testing.assert_array_equal(labels[0], [xs.min(), ys.min(), xs.max(), ys.max()])
+
+
+def test_a_nadir_sample_is_the_served_nadir_view_turned(toy_dataset: Callable[..., Path]) -> None:
+    frame = read_dataset(toy_dataset(count=1, size=128, people=16, seed=2))[0]
+    info = training_info(CONFIG)
+    assert frame.camera is not None
+    nadir = view_plan(info, frame.camera).nadir
+    assert nadir is not None and nadir.side <= CONFIG.input_size
+    view, labels = frame_nadir(frame, info) or (None, None)
+    assert view is not None and labels is not None and len(labels) >= 1
+    served = nadir_input(nadir, load_rgb(frame), frame.camera.image_size, info.pad_value)
+    np.testing.assert_array_equal(view, served)  # the view the service runs: a 128 px frame is not reduced
+    augment = dataclasses.replace(StripAugment.none(), nadir_view=1.0)
+    dataset = PolarStripDataset([frame], CONFIG, augment, seed=2)
+    for epoch in range(6):
+        dataset.set_epoch(epoch)
+        sample = dataset[0]
+        # padded to the strips' size, so that it stacks with them; no feet (taken from the box)
+        assert sample.image.shape == (64, 288, 3) and np.all(np.isnan(sample.feet))
+        assert np.all(sample.image[:, nadir.side:] == info.pad_value)
+        turns = [turn_square(view, labels, quarters, False) for quarters in range(4)]
+        assert any(np.array_equal(sample.image[:nadir.side, :nadir.side], image)
+                   and np.allclose(sample.labels_xyxy - EDGE_TO_CENTRE_PX, turned) for image, turned in turns)
+    with pytest.raises(ValueError, match="nadir_view"):
+        StripAugment(nadir_view=1.5)
 
 
 def test_the_strip_cache_stops_at_its_bound_with_the_same_samples(toy_dataset: Callable[..., Path]) -> None:
