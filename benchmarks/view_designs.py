@@ -42,9 +42,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 from contract import ModelError, ModelRunner, OnnxModel, SessionThreads
 from contract.detect import ContractModel
-from contract.metadata import OperatingPoint
+from contract.metadata import ModelInfo, OperatingPoint
+from contract.model import RawOutputs
 from contract.views import DEFAULT_VIEW, view_plan
 from fisheye.camera import MAX_SECOND_LOOK_PIXELS
 from fisheye.view_plan import SECOND_LOOK_FULL_PIXELS, ViewPlanConfig
@@ -121,6 +125,26 @@ class Read:
     figures: dict[str, Any]
     found: list[bool]
     sizes_px: list[float]
+
+
+@dataclass(frozen=True)
+class NadirPair:
+    """Two models as one: `strip` runs the canvas of bands (and the second look's patches), `nadir`
+    the nadir view (`ContractModel.run_boxes`, the call the service makes for it alone). A head
+    of its own for the nadir view, read before a graph picks its head per input."""
+
+    strip: ContractModel
+    nadir: ContractModel
+
+    @property
+    def info(self) -> ModelInfo:
+        return self.strip.info
+
+    def run(self, image: NDArray[np.uint8]) -> RawOutputs:
+        return self.strip.run(image)
+
+    def run_boxes(self, image: NDArray[np.uint8]) -> RawOutputs:
+        return self.nadir.run_boxes(image)
 
 
 def evaluate_design(model: ContractModel, view: ViewPlanConfig, frames: Sequence[Any],
@@ -322,6 +346,14 @@ def markdown_table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
     return "\n".join(lines)
 
 
+def planned_model(path: str, threads: int) -> OnnxModel:
+    """A planned ONNX model; ModelError for any other."""
+    model = OnnxModel(path, SessionThreads(intra_op=threads))
+    if not model.info.planned:
+        raise ModelError(f"{path} is not a planned model (fishloc export --planned)")
+    return model
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.view_designs", description=__doc__)
     parser.add_argument("--model", required=True, help="a planned ONNX model")
@@ -348,15 +380,18 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="read every scale of --scale-jitter at every start of --rotate-jitter (each "
                              "pair, 1 and 0 among them) and report the mean, min and max over all the "
                              "reads, rather than over the scales and over the starts apart")
+    parser.add_argument("--nadir-model", default=None, metavar="ONNX",
+                        help="run the nadir view by this planned model and the rest by --model "
+                             "(`NadirPair`: a head of its own for the nadir view, as two models)")
     parser.add_argument("--threads", type=int, default=2, help="inference threads (default 2)")
     parser.add_argument("--json", type=Path, default=None, help="where to write every figure")
     args = parser.parse_args(argv)
     from detector.data.readers import DatasetFormatError, read_dataset
 
     try:
-        model = OnnxModel(args.model, SessionThreads(intra_op=args.threads))
-        if not model.info.planned:
-            raise ModelError(f"{args.model} is not a planned model (fishloc export --planned)")
+        model: ContractModel = planned_model(args.model, args.threads)
+        if args.nadir_model is not None:
+            model = NadirPair(model, planned_model(args.nadir_model, args.threads))
         choose_on = None if args.choose is None else read_dataset(args.choose)[:args.limit]
         sets = read_sets(args.data, args.limit)
         if any(not 0.5 <= factor <= 2 or factor == 1 for factor in args.scale_jitter):

@@ -9,6 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "contract"))
@@ -17,6 +18,7 @@ from polar_double import save_polar_double
 
 from benchmarks.view_designs import (
     DESIGNS,
+    NadirPair,
     Read,
     main,
     markdown_table,
@@ -180,6 +182,28 @@ def test_steadiness_counts_who_each_read_found_by_size() -> None:
     assert steady["all"] == {"people": 3, "every_read": 1, "no_read": 1, "some_reads": 1}
     assert steady["small"] == {"people": 1, "every_read": 1, "no_read": 0, "some_reads": 0}
     assert steady["medium"]["no_read"] == 1 and steady["large"]["some_reads"] == 1
+
+
+def test_a_nadir_pair_runs_the_nadir_view_by_its_second_model(tmp_path: Path) -> None:
+    from contract import OnnxModel, SessionThreads
+
+    strip = OnnxModel(save_polar_double(tmp_path / "strip.onnx", planned=True, score=0.9), SessionThreads(1))
+    nadir = OnnxModel(save_polar_double(tmp_path / "nadir.onnx", planned=True, score=0.4), SessionThreads(1))
+    pair = NadirPair(strip, nadir)
+    image = np.zeros((64, 96, 3), np.uint8)
+    image[20:30, 40:50] = 255  # one bright person for the double to box
+    assert pair.info == strip.info
+    assert pair.run(image).scores[0] == pytest.approx(0.9, abs=1e-3)  # the canvas of bands: the strip's model
+    assert pair.run_boxes(image).scores[0] == pytest.approx(0.4, abs=1e-3)  # the nadir view: its own
+    # read through the service's runner, the nadir view's people take the second model's scores
+    samples = ROOT / "samples" / "annotations.json"
+    out, paired = tmp_path / "alone.json", tmp_path / "paired.json"
+    common = ["--data", f"samples={samples}", "--limit", "1", "--threads", "1",
+              "--design", "strip + nadir view 0.35 at 1.25x"]
+    assert main(["--model", str(tmp_path / "strip.onnx"), *common, "--json", str(out)]) == 0
+    assert main(["--model", str(tmp_path / "strip.onnx"), "--nadir-model", str(tmp_path / "strip.onnx"),
+                 *common, "--json", str(paired)]) == 0
+    assert json.loads(out.read_text()) == json.loads(paired.read_text())
 
 
 def test_a_fixed_strip_model_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
