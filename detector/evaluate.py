@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
+import cv2
 import numpy as np
 import torch
 from numpy.typing import NDArray
@@ -40,6 +41,7 @@ from contract.views import DEFAULT_VIEW, mapping_layout
 from detector.checkpoint import CheckpointError, load_checkpoint
 from detector.data.dataset import load_rgb
 from detector.data.readers import ASSUMED_LENSES, DatasetFormatError, FrameAnnotations, read_dataset
+from detector.drawing import draw_evaluated
 from detector.graph import contract_info, contract_module
 from detector.metrics import (
     BOX_SIDE,
@@ -228,6 +230,23 @@ def write_plots(evaluation: Evaluation, folder: Path, title: str) -> list[Path]:
     return [pr_path, pe_path]
 
 
+def write_drawings(frames: Sequence[FrameAnnotations], evaluated: Sequence[EvalFrame],
+                   outcomes: Sequence[PersonOutcome], errors: Sequence[FalsePositive], folder: Path
+                   ) -> list[Path]:
+    """Each frame drawn as the evaluation saw it (`detector.drawing.draw_evaluated`) into
+    `folder`/<image id>.png; the paths."""
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for frame, seen in zip(frames, evaluated, strict=True):
+        name = str(frame.image_id)
+        image = draw_evaluated(load_rgb(frame), seen, [o for o in outcomes if o.frame == name],
+                               [e for e in errors if e.frame == name])
+        path = folder / f"{Path(name).name}.png"
+        cv2.imwrite(str(path), image)
+        paths.append(path)
+    return paths
+
+
 def json_safe(value: Any) -> Any:
     """NaN and infinities -> None, recursively (strict JSON has no NaN)."""
     if isinstance(value, dict):
@@ -264,6 +283,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="write each annotated person's outcome here (found, low_score, loose_box, "
                              "missed; where they stand, the best detection's IoU, score and box), and "
                              "the counts by ring, size and frame into the JSON's 'people'")
+    parser.add_argument("--draw", default=None, metavar="FOLDER",
+                        help="write each frame here as a PNG with its people in the colour of their "
+                             "outcome (as --people) and the detections from score 0.1, the false "
+                             "positives marked (detector/drawing.py)")
     parser.add_argument("--false-positives", default=None, metavar="CSV",
                         help="write each false positive at the threshold here (duplicate, loose, "
                              "background; where, score, box, best IoU), and the counts into 'people'")
@@ -297,12 +320,14 @@ def run(args: argparse.Namespace) -> int:
         evaluation = evaluate(predictor, frames, progress=True, min_score=args.min_score)
         ious = sorted({point.nms_iou for point in predictor.points_used})
         extra["nms_iou"] = ious[0] if len(ious) == 1 else ious
-    if args.people or args.false_positives:
+    if args.people or args.false_positives or args.draw:
         outcomes, errors = breakdown(evaluation.frames, [str(f.image_id) for f in frames])
         if args.people:
             write_rows_csv(outcomes, args.people, PersonOutcome)
         if args.false_positives:
             write_rows_csv(errors, args.false_positives, FalsePositive)
+        if args.draw:
+            write_drawings(frames, evaluation.frames, outcomes, errors, Path(args.draw))
         extra["people"] = summarise_outcomes(outcomes, errors)
         print(json.dumps({"people": extra["people"]["all"]}))
     metrics = json_safe({**evaluation.metrics, **extra, "model": str(args.model), "data": str(args.data),

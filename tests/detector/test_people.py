@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
+from detector.drawing import DETECTION, FALSE_POSITIVE, OUTCOME_COLOURS, draw_evaluated
 from detector.metrics import EvalFrame
 from detector.people import (
     BACKGROUND,
@@ -154,6 +155,33 @@ def test_summary_by_ring_and_frame_and_the_csv(tmp_path: Path) -> None:
         breakdown(frames, ["a"])
 
 
+def _near(image: np.ndarray, colour: tuple[int, int, int], x: float, y: float, reach: int = 4) -> bool:
+    """Whether `colour` (BGR) is drawn within `reach` px of (x, y)."""
+    x0, y0 = round(x), round(y)
+    patch = image[max(0, y0 - reach):y0 + reach + 1, max(0, x0 - reach):x0 + reach + 1].astype(int)
+    return bool(np.any(np.abs(patch - np.array(colour)).sum(axis=2) < 30))
+
+
+def test_a_drawn_frame_shows_each_person_in_their_outcomes_colour() -> None:
+    # ABOVE found, RIGHT found below the threshold, LEFT missed; one detection on nobody
+    frame = _frame([ABOVE, RIGHT, LEFT], [ABOVE, RIGHT, [199.5, 320.5, 20.0, 40.0]], [0.9, 0.3, 0.8])
+    outcomes, errors = frame_breakdown(frame, "f")
+    assert [o.outcome for o in outcomes] == [FOUND, LOW_SCORE, MISSED] and len(errors) == 1
+    image = draw_evaluated(np.full((400, 400, 3), 90, np.uint8), frame, outcomes, errors)
+    assert image.shape == (400, 400, 3)
+    # each person's box edge (the far end along the ray, 20 px from the centre) in their colour
+    assert _near(image, OUTCOME_COLOURS[FOUND], 199.5, 79.5)
+    assert _near(image, OUTCOME_COLOURS[LOW_SCORE], 359.5, 199.5)
+    assert _near(image, OUTCOME_COLOURS[MISSED], 79.5, 199.5)
+    assert _near(image, FALSE_POSITIVE, 199.5, 340.5)  # the detection on nobody
+    assert not _near(image, DETECTION, 199.5, 340.5)
+    assert not _near(image, OUTCOME_COLOURS[MISSED], 199.5, 340.5)
+    big = draw_evaluated(np.full((3200, 2400, 3), 90, np.uint8), frame, outcomes, errors)
+    assert big.shape == (1600, 1200, 3)  # the longer side at most 1600 px
+    with pytest.raises(ValueError, match="outcomes"):
+        draw_evaluated(np.full((400, 400, 3), 90, np.uint8), frame, outcomes[:2], errors)
+
+
 def test_fishloc_eval_writes_each_persons_outcome(tmp_path: Path) -> None:
     """`fishloc eval --people` writes a row per annotated person of a real file and the counts
     into the JSON, which add up to the people the metrics count."""
@@ -169,7 +197,11 @@ def test_fishloc_eval_writes_each_persons_outcome(tmp_path: Path) -> None:
     }))
     out, people, wrong = tmp_path / "metrics.json", tmp_path / "people.csv", tmp_path / "fp.csv"
     assert main(["eval", "--model", str(DEFAULT_MODEL_PATH), "--data", str(data), "--json", str(out),
-                 "--people", str(people), "--false-positives", str(wrong)]) == 0
+                 "--people", str(people), "--false-positives", str(wrong),
+                 "--draw", str(tmp_path / "drawn")]) == 0
+    drawn = cv2.imread(str(tmp_path / "drawn" / "e.png"))
+    assert drawn.shape == (400, 400, 3)  # the frame, its three people drawn missed (nobody stands there)
+    assert all(_near(drawn, OUTCOME_COLOURS[MISSED], 130.0 + 40 * k, 120.0) for k in range(3))
     metrics = json.loads(out.read_text())
     counts = metrics["people"]["all"]
     assert counts["people"] == metrics["num_gt"] == 3
