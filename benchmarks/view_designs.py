@@ -112,6 +112,12 @@ DESIGNS: dict[str, ViewPlanConfig] = {
         DEFAULT_VIEW, max_pixels=budget, nadir_min_scale=keep)
        for budget in (800_000, 700_000, 600_000, 450_000, 350_000)
        for way, keep in (("no nadir view (the rule)", None), ("nadir view beside a smaller strip", 0.5))},
+    # after 0.8.0: candidates longer along the ray than so many standing adults where their feet
+    # stand dropped before NMS (`ViewPlanConfig.longest_person_ratio`), without and with the look
+    **{f"the default view, longer than {ratio:g} adults dropped": dataclasses.replace(
+        DEFAULT_VIEW, longest_person_ratio=ratio) for ratio in (1.6, 1.8, 2.0, 2.25)},
+    "the default view + second look, longer than 1.8 adults dropped": dataclasses.replace(
+        LOOKING, longest_person_ratio=1.8),
 }
 FIGURES = ("AP50", "precision", "recall", "AP_far", "recall_nadir", "mPE", "mPE_reported")
 JITTERED = ("AP50", "precision")  # the figures kept of every read again (`read_again`)

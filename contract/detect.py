@@ -34,7 +34,7 @@ from contract.views import (
     prepare_input,
 )
 from fisheye import FisheyeCamera, foot_points, rotated_iou, rotated_nms
-from fisheye.view_plan import ViewPlanConfig, view_layout
+from fisheye.view_plan import LongestPerson, ViewPlanConfig, view_layout
 
 FloatArray = NDArray[np.float64]
 
@@ -70,11 +70,13 @@ class Candidates:
 
 
 def frame_candidates(raw: RawOutputs, mapping: InputMapping, principal_point: tuple[float, float],
-                     min_score: float, presuppress_iou: float | None) -> Candidates:
+                     min_score: float, presuppress_iou: float | None, longest: LongestPerson | None = None
+                     ) -> Candidates:
     """One image's RawOutputs -> its candidates in frame px: score ≥ `min_score`, finite and usable
-    boxes, the view's NMS in input px at `presuppress_iou` (None: none), each foot point the
-    score-weighted median of its cluster's (`fused_feet`; with a presuppression only), people of the
-    nadir view standing where their box puts them (`nadir_feet`)."""
+    boxes, none longer than `longest` allows (a model with feet; None: no bound), the view's NMS in
+    input px at `presuppress_iou` (None: none), each foot point the score-weighted median of its
+    cluster's (`fused_feet`; with a presuppression only), people of the nadir view standing where
+    their box puts them (`nadir_feet`)."""
     boxes = raw.boxes.astype(np.float64)
     scores = raw.scores.astype(np.float64)
     valid = np.isfinite(scores) & np.all(np.isfinite(boxes), axis=1)
@@ -82,6 +84,8 @@ def frame_candidates(raw: RawOutputs, mapping: InputMapping, principal_point: tu
     feet = None if raw.foot is None else raw.foot.astype(np.float64)
     if feet is not None:
         valid &= np.all(np.isfinite(feet), axis=1)
+        if longest is not None:
+            valid[valid] = ~too_long(longest, mapping, boxes[valid], feet[valid], principal_point)
     keep = valid & (scores >= min_score)
     order = (mapping.presuppress(boxes[keep], scores[keep], presuppress_iou) if presuppress_iou is not None
              else np.arange(int(keep.sum())))
@@ -100,6 +104,25 @@ def frame_candidates(raw: RawOutputs, mapping: InputMapping, principal_point: tu
     return Candidates(boxes_frame, kept_scores, foot)
 
 
+def too_long(longest: LongestPerson, mapping: InputMapping, boxes: FloatArray, feet: FloatArray,
+             principal_point: tuple[float, float]) -> NDArray[np.bool_]:
+    """(N,) which of (N, 4) input boxes with (N, 2) input feet run longer along the ray than
+    `longest` allows where their feet stand; the nadir view's (whose feet come from the box) are
+    never judged."""
+    judged = ~mapping.box_side_feet(boxes)
+    found = np.zeros(len(boxes), dtype=bool)
+    if judged.any():
+        found[judged] = longest.too_long(mapping.boxes_to_frame(boxes[judged]),
+                                         mapping.points_to_frame(feet[judged]), principal_point)
+    return found
+
+
+def longest_person(mapping: InputMapping) -> LongestPerson | None:
+    """The bound a planned view's plan sets on its candidates' lengths (`fisheye.view_plan.
+    LongestPerson`); None for other views and plans without one."""
+    return mapping.plan.longest_person if isinstance(mapping, PlannedInput) else None
+
+
 def select_detections(raw: RawOutputs, mapping: InputMapping, principal_point: tuple[float, float],
                       min_score: float, nms_iou: float | None = 0.6, max_detections: int = 300
                       ) -> FrameDetections:
@@ -108,7 +131,7 @@ def select_detections(raw: RawOutputs, mapping: InputMapping, principal_point: t
     With NMS (`nms_iou` not None), each kept detection's foot point is the score-weighted median of
     those of its cluster (`fused_feet`); without, every output is passed through as it is. People
     of the nadir view stand where their box puts them (`nadir_feet`)."""
-    found = frame_candidates(raw, mapping, principal_point, min_score, nms_iou)
+    found = frame_candidates(raw, mapping, principal_point, min_score, nms_iou, longest_person(mapping))
     if nms_iou is not None and len(found.scores) > 1:
         kept = rotated_nms(found.boxes_cxcywh, found.scores, principal_point, nms_iou)[:max_detections]
     else:
@@ -194,7 +217,8 @@ def second_look(model: ContractModel, image: NDArray[np.uint8], scale_xy: tuple[
     for patch, raw in zip(patches, raws, strict=True):
         # The strip's own NMS is the patch's: one band's piece has no overlap columns for the
         # rotated one to merge, and that runs over every look's people below.
-        found = frame_candidates(raw, PolarInput(patch.grid), pp, look.FIRST_LOOK_FLOOR, nms_iou)
+        found = frame_candidates(raw, PolarInput(patch.grid), pp, look.FIRST_LOOK_FLOOR, nms_iou,
+                                 longest_person(mapping))
         keep = look.patch_keeps(patch, found.boxes_cxcywh)
         keep[keep] = ~look.parts_of(patch.band, found.boxes_cxcywh[keep], others)
         boxes.append(found.boxes_cxcywh[keep])

@@ -275,6 +275,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--second-look", type=int, default=None, metavar="PIXELS",
                         help="a planned model's second look, as fishloc serve --second-look (px of its "
                              "patches in all; default 0: none)")
+    parser.add_argument("--longest-person-ratio", type=float, default=None, metavar="RATIO",
+                        help="a planned model's candidates longer along the ray than RATIO standing adults "
+                             "where their feet stand are dropped before NMS "
+                             "(ViewPlanConfig.longest_person_ratio; default: no bound)")
     parser.add_argument("--assumed-camera", choices=ASSUMED_LENSES, default="short-side",
                         help="camera of frames without a calibration (CEPDOF/WEPDTOF files): the 180° "
                              "circle that fills the frame's shorter side (default, DESIGN.md), or the "
@@ -306,7 +310,8 @@ def run(args: argparse.Namespace) -> int:
         frames = frames[:args.limit]
     extra: dict[str, Any] = {}
     try:
-        asked = (("max_pixels", args.max_view_pixels), ("second_look_pixels", args.second_look))
+        asked = (("max_pixels", args.max_view_pixels), ("second_look_pixels", args.second_look),
+                 ("longest_person_ratio", args.longest_person_ratio))
         view = dataclasses.replace(DEFAULT_VIEW, **{name: v for name, v in asked if v is not None})
     except ValueError as error:
         print(f"fishloc eval: {error}", file=sys.stderr)

@@ -159,6 +159,14 @@ class ViewPlanConfig:
     second_look_zoom: float = 2.0
     second_look_pixels: int = 0
     second_look_target_rows: float = 48.0
+    # A candidate whose box runs along the ray more than this many times a standing adult's length
+    # with their feet at its foot point is no person (`LongestPerson`): the camera's geometry
+    # bounds how long a person can come out. Judged where the floor lies at least a person's height
+    # (`person_height_m`) from below the lens in every direction, up to `floor_theta_deg`; below
+    # the lens a person is seen from above and the nadir view's boxes are read otherwise. 1.8 was
+    # chosen over 1.6, 2.0 and 2.25 on the validation renders (AP50, then precision;
+    # docs/DETECTOR.md, "A person's length bounded by the camera"). None: no bound.
+    longest_person_ratio: float | None = None
 
     def __post_init__(self) -> None:
         if not self.scales or any(not (0.25 <= s <= 4.0) for s in self.scales) or (
@@ -195,6 +203,8 @@ class ViewPlanConfig:
                              f"{self.second_look_pixels}")
         if not 1 <= self.unwrap_samples <= 4:
             raise ValueError(f"unwrap_samples must lie in [1, 4], got {self.unwrap_samples}")
+        if self.longest_person_ratio is not None and not 1.0 <= self.longest_person_ratio <= 10.0:
+            raise ValueError(f"longest_person_ratio must lie in [1, 10], got {self.longest_person_ratio}")
         if self.nadir_strip_from is not None and not 0 < self.nadir_strip_from < self.nadir_view_fraction:
             raise ValueError("need 0 < nadir_strip_from < nadir_view_fraction: the nadir view must show "
                              "the disc the strip leaves out")
@@ -251,6 +261,28 @@ class SmallestPerson:
 
 
 @dataclass(frozen=True)
+class LongestPerson:
+    """How long along the ray a person may come out, by the radius of their feet: `ratio` times the
+    longest standing adult (`ViewPlanConfig.person_height_m`) over the directions of the frame,
+    sampled at `radii_px` (frame px from the principal point, increasing); NaN where nothing is
+    judged (below the lens, past the planned floor, off the frame)."""
+
+    radii_px: tuple[float, ...]
+    along_px: tuple[float, ...]
+    ratio: float
+
+    def too_long(self, boxes_cxcywh: NDArray[np.floating], feet_px: NDArray[np.floating],
+                 principal_point: tuple[float, float]) -> NDArray[np.bool_]:
+        """(N,) which of (N, 4) radius-aligned frame boxes (`h` along the ray) are longer than
+        `ratio` standing adults with their feet at (N, 2) `feet_px`."""
+        feet = np.asarray(feet_px, dtype=np.float64)
+        radius = np.hypot(feet[:, 0] - principal_point[0], feet[:, 1] - principal_point[1])
+        limit = np.interp(radius, self.radii_px, self.along_px, left=np.nan, right=np.nan) * self.ratio
+        with np.errstate(invalid="ignore"):
+            return np.asarray(boxes_cxcywh, dtype=np.float64)[:, 3] > limit  # NaN: not judged
+
+
+@dataclass(frozen=True)
 class ViewPlan:
     """The planned view of one camera: the grids of its pieces (frame px) and where each sits in the
     canvas (`row_offsets`), the canvas's (width, height), its bands and what it costs."""
@@ -273,6 +305,7 @@ class ViewPlan:
     second_look_zoom: float = 2.0
     second_look_pixels: int = 0
     second_look_target_rows: float = 0.0
+    longest_person: LongestPerson | None = None  # `ViewPlanConfig.longest_person_ratio`; None: no bound
 
     def second_look_zoom_for(self, along_rows: float) -> float:
         """The zoom of a patch about a person `along_rows` band rows long: `second_look_zoom`, or
@@ -324,6 +357,7 @@ class ViewPlan:
                 "max_zoom": SECOND_LOOK_MAX_ZOOM if self.second_look_target_rows else self.second_look_zoom,
                 "patch_px": list(SECOND_LOOK_PATCH_PX), "max_pixels": self.second_look_pixels,
                 "max_cost_ratio": round(self.second_look_pixels / self.reference_pixels, 3)},
+            "longest_person_ratio": None if self.longest_person is None else self.longest_person.ratio,
             "notes": list(self.notes),
         }
 
@@ -351,11 +385,11 @@ def farthest_corner_px(camera: FisheyeCamera) -> float:
     return max(math.hypot(u - u0, v - v0) for u in (-0.5, width - 0.5) for v in (-0.5, height - 0.5))
 
 
-def person_sizes(camera: FisheyeCamera, radii_px: FloatArray, config: ViewPlanConfig, directions: int = 24
-                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """For feet at (R,) frame radii: the smallest over `directions` rays of a standing adult's extent
-    along the ray (frame px) and across it (radians of screen angle), and the largest floor distance
-    (m); NaN where no ray in the frame has a floor point at that radius."""
+def _standing_adults(camera: FisheyeCamera, radii_px: FloatArray, config: ViewPlanConfig, directions: int
+                     ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """For feet at (R,) frame radii along each of `directions` rays: a standing adult's extent along
+    the ray (frame px) and across it (radians of screen angle), and the floor distance (m), each
+    (R, D); NaN off the frame, past the horizon or past `floor_theta_deg`."""
     u0, v0 = camera.principal_point
     width, height = camera.image_size
     angles = np.arange(directions) * TWO_PI / directions
@@ -378,11 +412,37 @@ def person_sizes(camera: FisheyeCamera, radii_px: FloatArray, config: ViewPlanCo
     bad = ~inside | ~np.isfinite(distance) | ~np.isfinite(along) | beyond
     along, across, distance = (np.where(bad, np.nan, a).reshape(len(radii_px), directions)
                                for a in (along, across, distance))
+    return along, across, distance
+
+
+def person_sizes(camera: FisheyeCamera, radii_px: FloatArray, config: ViewPlanConfig, directions: int = 24
+                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """For feet at (R,) frame radii: the smallest over `directions` rays of a standing adult's extent
+    along the ray (frame px) and across it (radians of screen angle), and the largest floor distance
+    (m); NaN where no ray in the frame has a floor point at that radius."""
+    along, across, distance = _standing_adults(camera, radii_px, config, directions)
     with np.errstate(all="ignore"):
         seen = ~np.all(np.isnan(along), axis=1)
         return (np.where(seen, np.nanmin(np.where(np.isnan(along), np.inf, along), axis=1), np.nan),
                 np.where(seen, np.nanmin(np.where(np.isnan(across), np.inf, across), axis=1), np.nan),
                 np.where(seen, np.nanmax(np.where(np.isnan(distance), -np.inf, distance), axis=1), np.nan))
+
+
+def longest_person(camera: FisheyeCamera, top_px: float, config: ViewPlanConfig, samples: int = 128,
+                   directions: int = 24) -> LongestPerson | None:
+    """The bound `ViewPlanConfig.longest_person_ratio` sets on `camera`'s detections out to `top_px`
+    frame px from the principal point; None where the config sets none."""
+    if config.longest_person_ratio is None:
+        return None
+    radii = np.linspace(0.0, top_px, samples)
+    along, _, distance = _standing_adults(camera, radii, config, directions)
+    with np.errstate(all="ignore"):
+        # below the lens in any direction the person is seen from above: nothing judged there
+        near = np.any(distance < config.person_height_m, axis=1)
+        seen = ~np.all(np.isnan(along), axis=1) & ~near
+        longest = np.where(seen, np.nanmax(np.where(np.isnan(along), -np.inf, along), axis=1), np.nan)
+    return LongestPerson(tuple(float(r) for r in radii), tuple(float(a) for a in longest),
+                         config.longest_person_ratio)
 
 
 def _needed_scale(along_px: FloatArray, across_rad: FloatArray, rows_per_px: float,
@@ -592,7 +652,7 @@ def plan_view(camera: FisheyeCamera, reference: ViewReference | None = None,
         look_pixels = 0
     return ViewPlan(grids, offsets, canvas, tuple(bands), smallest, reference.pixels, tuple(notes), nadir,
                     wanted_pixels, config.second_look_patches if look_pixels else 0, config.second_look_zoom,
-                    look_pixels, config.second_look_target_rows)
+                    look_pixels, config.second_look_target_rows, longest_person(camera, top, config))
 
 
 def _beside_nadir(camera: FisheyeCamera, wanted: list[ViewBand], planned: list[ViewBand], top: float,

@@ -8,12 +8,21 @@ import pytest
 from polar_double import METADATA
 
 from contract import ModelError, PolarInput, RawOutputs, parse_metadata, select_detections
-from contract.detect import FOOT_FUSION_IOU, FOOT_FUSION_SCORE, weighted_medians
+from contract.detect import (
+    FOOT_FUSION_IOU,
+    FOOT_FUSION_SCORE,
+    frame_candidates,
+    longest_person,
+    too_long,
+    weighted_medians,
+)
 from contract.metadata import LEGACY_NMS_IOU
-from contract.views import strip_nms
+from contract.views import PlannedInput, strip_nms
 from detector.metrics import EvalFrame
 from detector.operating_point import choose, sweep
+from fisheye import load_camera
 from fisheye.polar import PolarGrid
+from fisheye.view_plan import LongestPerson, ViewPlanConfig, plan_view
 
 GRID = PolarGrid(principal_point=(255.5, 255.5), radius_px=250.0, height=64, width=256, overlap=32)
 PP = GRID.principal_point
@@ -165,3 +174,34 @@ def test_a_malformed_view_point_argument_is_refused(argument: str, message: str)
         "2band+nadir": [0.346, 0.3], "1band": [0.2, 0.4]}
     with pytest.raises(CheckpointError, match=message):
         parse_view_point_args([argument])
+
+
+def test_a_candidate_longer_than_the_camera_allows_is_dropped_before_nms() -> None:
+    # 90 frame px along the ray at most anywhere on this grid (1.8 x 50 px): a strip row is 3.9 px
+    longest = LongestPerson(radii_px=(0.0, 300.0), along_px=(50.0, 50.0), ratio=1.8)
+    raw = _raw([[100, 10, 110, 40],   # 30 rows: 117 px, the best score, overlapping the next
+                [100, 18, 110, 38]],  # 20 rows: 78 px
+               [0.9, 0.8], [[105, 40], [105, 38]])
+    unbounded = select_detections(raw, PolarInput(GRID), PP, min_score=0.25, nms_iou=0.45)
+    assert len(unbounded.scores) == 1 and unbounded.scores[0] == pytest.approx(0.9)
+    found = frame_candidates(raw, PolarInput(GRID), PP, 0.25, 0.45, longest)
+    assert found.scores.tolist() == pytest.approx([0.8])
+    assert found.boxes_cxcywh[0, 3] < 90 < unbounded.boxes_cxcywh[0, 3]
+
+
+def test_the_planned_views_bound_spares_the_nadir_view() -> None:
+    plan = plan_view(load_camera("models/demo_camera.yaml"), config=ViewPlanConfig(longest_person_ratio=1.8))
+    mapping = PlannedInput(plan)
+    assert longest_person(mapping) is plan.longest_person is not None
+    assert longest_person(PolarInput(GRID)) is None
+    assert longest_person(PlannedInput(plan_view(load_camera("models/demo_camera.yaml")))) is None
+    assert plan.nadir is not None
+    column = plan.nadir.column
+    # The strip's rows run from the rim (row 0) in; feet at row 150 stand 613 px out, where a standing
+    # adult is 172 px long. A box filling the nadir view is never judged; in the strip 150 rows
+    # (346 px) are too long, 100 rows (231 px) are not.
+    boxes = np.array([[column + 10.0, 10, column + 370, 370], [100, 0, 120, 150], [100, 50, 120, 150]])
+    feet = np.array([[column + 190.0, 370], [110, 150], [110, 150]])
+    pp = plan.grids[0].principal_point
+    found = too_long(plan.longest_person, mapping, boxes, feet, pp)
+    np.testing.assert_array_equal(found, [False, True, False])

@@ -271,3 +271,23 @@ def test_with_the_nadir_view_the_strip_may_leave_it_the_disc() -> None:
 def test_a_strip_start_the_nadir_view_does_not_cover_is_refused(start: float) -> None:
     with pytest.raises(ValueError, match="nadir_strip_from"):
         ViewPlanConfig(nadir_strip_from=start)
+
+
+def test_the_longest_person_is_a_standing_adult_times_the_ratio_away_from_below_the_lens() -> None:
+    config = ViewPlanConfig(longest_person_ratio=1.8)
+    longest = plan_view(DEMO, config=config).longest_person
+    assert longest is not None and plan_view(DEMO).longest_person is None
+    assert plan_view(DEMO, config=config).public()["longest_person_ratio"] == 1.8
+    pp = DEMO.principal_point
+    feet, head = DEMO.world_to_pixels(np.array([[3.0, 0.0, 0.0], [3.0, 0.0, config.person_height_m]]))
+    length = float(np.hypot(*(head - feet)))
+    centre = (feet + head) / 2
+    boxes = np.array([[centre[0], centre[1], 40.0, length * f] for f in (1.0, 1.7, 1.9)])
+    # the demo camera looks straight down: every direction's adult is as long as this one
+    found = longest.too_long(boxes, np.repeat(feet[None], 3, 0), pp)
+    np.testing.assert_array_equal(found, [False, False, True])
+    # within a person's height of the spot below the lens nothing is judged, however long
+    near = DEMO.world_to_pixels(np.array([[1.0, 0.0, 0.0]]))
+    assert not longest.too_long(np.array([[near[0, 0], near[0, 1], 40.0, 5000.0]]), near, pp)[0]
+    with pytest.raises(ValueError, match="longest_person_ratio"):
+        ViewPlanConfig(longest_person_ratio=0.5)
