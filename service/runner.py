@@ -165,7 +165,8 @@ def build_runner(settings: Settings, metrics: ServiceMetrics) -> InferenceRunner
     model = OnnxModel(settings.model, SessionThreads(intra_op=settings.threads, inter_op=1,
                                                      spinning=settings.onnx_spinning))
     view = dataclasses.replace(DEFAULT_VIEW, max_pixels=settings.max_view_pixels,
-                               second_look_pixels=settings.second_look)
+                               second_look_pixels=settings.second_look,
+                               longest_person_ratio=settings.longest_person_ratio)
     pipeline = Pipeline(model, PipelineConfig(
         nms_iou=settings.nms_iou, max_pixels=settings.max_pixels, view=view,
         max_camera_view_pixels=settings.max_camera_view_pixels))

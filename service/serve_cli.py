@@ -64,6 +64,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "its patches of at most this many px (a "
                              "planned model only; env FISHLOC_SECOND_LOOK; default 0: none; 786432: "
                              "12 patches' px at their largest; 1.2-1.8x the time of a frame without it)")
+    parser.add_argument("--longest-person-ratio", type=float, metavar="RATIO",
+                        help="drop candidates longer along the ray than RATIO standing adults where their "
+                             "feet stand, before NMS (a planned model only; env "
+                             "FISHLOC_LONGEST_PERSON_RATIO; default: none; for calibrated cameras, 1.8 "
+                             "chosen on renders)")
     parser.add_argument("--max-camera-view-pixels", type=int, metavar="PIXELS",
                         help="the largest budget a camera's record may set for its view (env "
                              "FISHLOC_MAX_CAMERA_VIEW_PIXELS; default 4000000)")
@@ -72,8 +77,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def settings_from_args(args: argparse.Namespace) -> Settings:
     """Settings from the environment with the flags that were given on top."""
     names = ("host", "http_port", "grpc_port", "model", "cameras", "database", "threads", "onnx_spinning",
-             "demo_camera", "max_view_pixels", "max_camera_view_pixels", "second_look", "mqtt", "mqtt_prefix",
-             "history_retention_days", "sites_bus")
+             "demo_camera", "max_view_pixels", "max_camera_view_pixels", "second_look",
+             "longest_person_ratio", "mqtt", "mqtt_prefix", "history_retention_days", "sites_bus")
     overrides = {name: getattr(args, name) for name in names if getattr(args, name, None) is not None}
     return Settings(**overrides)
 

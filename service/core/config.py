@@ -76,6 +76,11 @@ class Settings(BaseSettings):
                                          "detections may take, its patches packed into one input "
                                          "(a planned model only; 0: none; "
                                          f"{SECOND_LOOK_FULL_PIXELS}: 12 patches' px at their largest)")
+    longest_person_ratio: float | None = Field(
+        None, ge=1, le=10,
+        description="candidates longer along the ray than this many standing adults where their feet "
+                    "stand are dropped before NMS (a planned model only; for calibrated cameras: at a "
+                    "guessed altitude it drops real people; none by default)")
     threads: int = Field(default_factory=cpu_budget, ge=1,
                          description="inference threads (default: the CPU quota of the container)")
     onnx_spinning: SpinningPolicy = Field(

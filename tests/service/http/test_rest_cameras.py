@@ -119,7 +119,7 @@ def test_a_planned_model_reports_each_camera_view(settings_for: Callable[..., Se
         model = httpx.get(f"{live.url}/v1/model").json()
         assert view["layout"] == "1band+nadir" and view["operating_point"] == {
             "min_score": model["default_min_score"], "nms_iou": model["nms_iou"]}
-        assert view["second_look"] is None  # none unless asked for
+        assert view["second_look"] is None and view["longest_person_ratio"] is None  # none unless asked for
         assert "view" not in httpx.get(f"{live.url}/v1/cameras").json()["cameras"][0]
         # A record read back is written back as it is: its view is the service's, not part of it.
         record = httpx.get(f"{live.url}/v1/cameras/demo").json()
@@ -135,6 +135,14 @@ def test_a_planned_model_reports_each_camera_view(settings_for: Callable[..., Se
                                        "max_pixels": 786_432, "source": "server",
                                        "max_cost_ratio": round(786_432 / (1792 * 416), 3)}
         assert view["input_wh"] == [1792, 416]
+    with LiveServer(settings_for(model=DEFAULT_MODEL_PATH, longest_person_ratio=1.8)) as live:
+        # the bound on a person's length asked for: the same view, reported with it, serving people
+        view = httpx.get(f"{live.url}/v1/cameras/demo").json()["view"]
+        assert view["layout"] == "1band+nadir" and view["longest_person_ratio"] == 1.8
+        sample = (SAMPLES / "000001.jpg").read_bytes()
+        answer = httpx.post(f"{live.url}/v1/cameras/demo/detect", content=sample,
+                            headers={"Content-Type": "image/jpeg"}, timeout=60)
+        assert answer.status_code == 200 and len(answer.json()["detections"]) >= 5
     with LiveServer(settings_for(model=DEFAULT_MODEL_PATH, max_view_pixels=4_000_000)) as live:
         view = httpx.get(f"{live.url}/v1/cameras/demo").json()["view"]
         assert [band["scale"] for band in view["bands"]] == [1.0, 1.5]
