@@ -192,10 +192,13 @@ def view_reference(info: ModelInfo) -> ViewReference:
 def camera_view(config: ViewPlanConfig, camera: FisheyeCamera, limit: int | None = None) -> ViewPlanConfig:
     """How `camera`'s view is planned: `config` with the camera's own budget (its record's
     `max_view_pixels`) in place of `config`'s, at most `limit` where one is given, and its own
-    second look (`second_look_pixels`) in place of `config`'s where its record sets one."""
-    own, look = camera.max_view_pixels, camera.second_look_pixels
+    second look (`second_look_pixels`) and bound on a person's length (`longest_person_ratio`, 0:
+    none) in place of `config`'s where its record sets them."""
+    own, look, longest = camera.max_view_pixels, camera.second_look_pixels, camera.longest_person_ratio
     if own is not None:
         config = dataclasses.replace(config, max_pixels=own if limit is None else min(own, limit))
+    if longest is not None:
+        config = dataclasses.replace(config, longest_person_ratio=longest or None)
     return config if look is None else dataclasses.replace(config, second_look_pixels=look)
 
 

@@ -37,6 +37,9 @@ MAX_VIEW_PIXELS = 64_000_000
 # The most input px a second look may take (`fisheye.view_plan.ViewPlanConfig.second_look_pixels`):
 # 64 patches of 256 x 256.
 MAX_SECOND_LOOK_PIXELS = 64 * 256 * 256
+# The range of a bound on a person's length along the ray, in standing adults
+# (`fisheye.view_plan.ViewPlanConfig.longest_person_ratio`); a camera's record may also say 0: none.
+MIN_LONGEST_PERSON_RATIO, MAX_LONGEST_PERSON_RATIO = 1.0, 10.0
 
 
 @dataclass(frozen=True)
@@ -86,6 +89,19 @@ class FisheyeCamera(BaseModel):
         description="This camera's own budget for the second look at its frames' small, uncertain "
                     "detections (input px of its one run), in place of the server's --second-look: "
                     "786432 for a crowded scene, 0 for none.")
+    longest_person_ratio: float | None = Field(
+        default=None, ge=0, le=MAX_LONGEST_PERSON_RATIO,
+        description="This camera's own bound on a detection's length along the ray, in standing adults "
+                    "where its feet stand (1-10), in place of the server's --longest-person-ratio: 1.8 "
+                    "for a calibrated camera, 0 for none.")
+
+    @field_validator("longest_person_ratio")
+    @classmethod
+    def _check_longest_person_ratio(cls, value: float | None) -> float | None:
+        if value is not None and 0 < value < MIN_LONGEST_PERSON_RATIO:
+            raise ValueError(f"longest_person_ratio must be 0 (none) or lie in "
+                             f"[{MIN_LONGEST_PERSON_RATIO:g}, {MAX_LONGEST_PERSON_RATIO:g}] standing adults")
+        return value
 
     @field_validator("id")
     @classmethod

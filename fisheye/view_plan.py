@@ -38,7 +38,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from fisheye.camera import MAX_SECOND_LOOK_PIXELS, FisheyeCamera
+from fisheye.camera import (
+    MAX_LONGEST_PERSON_RATIO,
+    MAX_SECOND_LOOK_PIXELS,
+    MIN_LONGEST_PERSON_RATIO,
+    FisheyeCamera,
+)
 from fisheye.lens import theta_to_radius
 from fisheye.polar import TWO_PI, PolarGrid
 
@@ -206,8 +211,10 @@ class ViewPlanConfig:
                              f"{self.second_look_pixels}")
         if not 1 <= self.unwrap_samples <= 4:
             raise ValueError(f"unwrap_samples must lie in [1, 4], got {self.unwrap_samples}")
-        if self.longest_person_ratio is not None and not 1.0 <= self.longest_person_ratio <= 10.0:
-            raise ValueError(f"longest_person_ratio must lie in [1, 10], got {self.longest_person_ratio}")
+        if self.longest_person_ratio is not None and not (
+                MIN_LONGEST_PERSON_RATIO <= self.longest_person_ratio <= MAX_LONGEST_PERSON_RATIO):
+            raise ValueError(f"longest_person_ratio must lie in [{MIN_LONGEST_PERSON_RATIO:g}, "
+                             f"{MAX_LONGEST_PERSON_RATIO:g}], got {self.longest_person_ratio}")
         if self.nadir_strip_from is not None and not 0 < self.nadir_strip_from < self.nadir_view_fraction:
             raise ValueError("need 0 < nadir_strip_from < nadir_view_fraction: the nadir view must show "
                              "the disc the strip leaves out")

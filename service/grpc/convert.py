@@ -130,6 +130,8 @@ def camera_to_message(camera: FisheyeCamera) -> pb.Camera:
         message.max_view_pixels = camera.max_view_pixels
     if camera.second_look_pixels is not None:
         message.second_look_pixels = camera.second_look_pixels
+    if camera.longest_person_ratio is not None:
+        message.longest_person_ratio = camera.longest_person_ratio
     return message
 
 
@@ -157,6 +159,8 @@ def message_to_camera(message: pb.Camera) -> FisheyeCamera:
         record["max_view_pixels"] = message.max_view_pixels
     if message.HasField("second_look_pixels"):
         record["second_look_pixels"] = message.second_look_pixels
+    if message.HasField("longest_person_ratio"):
+        record["longest_person_ratio"] = message.longest_person_ratio
     return camera_from_dict(record)
 
 

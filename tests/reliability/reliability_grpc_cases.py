@@ -168,6 +168,8 @@ GRPC_CAMERA_CASES: list[GrpcCameraCase] = [
     _calibration("view_budget_tiny", "max_view_pixels 100", "max_view_pixels", max_view_pixels=100),
     _calibration("second_look_negative", "second_look_pixels -1", "second_look_pixels",
                  second_look_pixels=-1),
+    _calibration("longest_person_nan", "longest_person_ratio NaN", "longest_person_ratio",
+                 longest_person_ratio=math.nan),
     _calibration("altitude_zero", "altitude_m 0", "altitude_m", altitude_m=0.0),
     _calibration("altitude_negative", "altitude_m -3", "altitude_m", altitude_m=-3.0),
     _calibration("focal_negative", "focal_px x -320", "focal_px", focal_px=pb.Point(x=-320, y=320)),

@@ -19,7 +19,7 @@ TRUE = camera_from_dict({
 # What the registry has before the calibration: an ideal lens guessed at the frame's centre.
 GUESS = dict(camera_to_dict(TRUE), kb=[1.0], focal_px=[400.0, 400.0], principal_point=[799.5, 599.5],
              site_pose={"x_m": 4.0, "y_m": -1.0, "yaw_deg": 30.0}, max_view_pixels=2_000_000,
-             second_look_pixels=786_432)
+             second_look_pixels=786_432, longest_person_ratio=1.8)
 RULERS = {"east": (10.0, [1, 2, 3, 4, 5, 6, 7, 8]), "north": (100.0, [2, 4, 6, 8]),
           "west": (190.0, [1, 2, 3, 4, 5, 6, 7, 8]), "south": (280.0, [2, 4, 6, 8])}
 OPTIONS = {"coefficients": 3, "fit_principal_point": True, "fit_tilt": False}

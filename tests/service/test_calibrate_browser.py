@@ -134,6 +134,7 @@ def test_calibrating_a_rendered_frame_by_clicking_its_marks(
     assert saved["site_pose"] == GUESS["site_pose"]  # where the camera stands is not the lens's business
     assert saved["max_view_pixels"] == GUESS["max_view_pixels"]  # nor its own view budget
     assert saved["second_look_pixels"] == GUESS["second_look_pixels"]  # nor its second look
+    assert saved["longest_person_ratio"] == GUESS["longest_person_ratio"]  # nor its bound on people
     camera = load_camera(saved)
     assert floor_error_at_m(camera, 8.0) < 0.02
     assert floor_error_at_m(camera, 5.0) < 0.01

@@ -143,7 +143,7 @@ class SitePose(_message.Message):
     def __init__(self, x_m: _Optional[float] = ..., y_m: _Optional[float] = ..., yaw_deg: _Optional[float] = ...) -> None: ...
 
 class Camera(_message.Message):
-    __slots__ = ("id", "altitude_m", "image_size", "principal_point", "focal_px", "kb", "max_theta_deg", "site_pose", "site", "tilt_deg", "masks_px", "max_view_pixels", "second_look_pixels")
+    __slots__ = ("id", "altitude_m", "image_size", "principal_point", "focal_px", "kb", "max_theta_deg", "site_pose", "site", "tilt_deg", "masks_px", "max_view_pixels", "second_look_pixels", "longest_person_ratio")
     ID_FIELD_NUMBER: _ClassVar[int]
     ALTITUDE_M_FIELD_NUMBER: _ClassVar[int]
     IMAGE_SIZE_FIELD_NUMBER: _ClassVar[int]
@@ -157,6 +157,7 @@ class Camera(_message.Message):
     MASKS_PX_FIELD_NUMBER: _ClassVar[int]
     MAX_VIEW_PIXELS_FIELD_NUMBER: _ClassVar[int]
     SECOND_LOOK_PIXELS_FIELD_NUMBER: _ClassVar[int]
+    LONGEST_PERSON_RATIO_FIELD_NUMBER: _ClassVar[int]
     id: str
     altitude_m: float
     image_size: ImageSize
@@ -170,7 +171,8 @@ class Camera(_message.Message):
     masks_px: _containers.RepeatedCompositeFieldContainer[Polygon]
     max_view_pixels: int
     second_look_pixels: int
-    def __init__(self, id: _Optional[str] = ..., altitude_m: _Optional[float] = ..., image_size: _Optional[_Union[ImageSize, _Mapping]] = ..., principal_point: _Optional[_Union[Point, _Mapping]] = ..., focal_px: _Optional[_Union[Point, _Mapping]] = ..., kb: _Optional[_Iterable[float]] = ..., max_theta_deg: _Optional[float] = ..., site_pose: _Optional[_Union[SitePose, _Mapping]] = ..., site: _Optional[str] = ..., tilt_deg: _Optional[_Union[Point, _Mapping]] = ..., masks_px: _Optional[_Iterable[_Union[Polygon, _Mapping]]] = ..., max_view_pixels: _Optional[int] = ..., second_look_pixels: _Optional[int] = ...) -> None: ...
+    longest_person_ratio: float
+    def __init__(self, id: _Optional[str] = ..., altitude_m: _Optional[float] = ..., image_size: _Optional[_Union[ImageSize, _Mapping]] = ..., principal_point: _Optional[_Union[Point, _Mapping]] = ..., focal_px: _Optional[_Union[Point, _Mapping]] = ..., kb: _Optional[_Iterable[float]] = ..., max_theta_deg: _Optional[float] = ..., site_pose: _Optional[_Union[SitePose, _Mapping]] = ..., site: _Optional[str] = ..., tilt_deg: _Optional[_Union[Point, _Mapping]] = ..., masks_px: _Optional[_Iterable[_Union[Polygon, _Mapping]]] = ..., max_view_pixels: _Optional[int] = ..., second_look_pixels: _Optional[int] = ..., longest_person_ratio: _Optional[float] = ...) -> None: ...
 
 class Polygon(_message.Message):
     __slots__ = ("points",)

@@ -55,9 +55,10 @@ async def list_cameras(state: State) -> dict[str, list[dict[str, Any]]]:
                         "(`source`: the server's `--max-view-pixels`, or the camera record's own "
                         "`max_view_pixels`), its `second_look` where it has one (its `source`: the "
                         "server's `--second-look` or the record's own `second_look_pixels`; "
-                        "`max_cost_ratio`: its px at most against the trained strip's) and the "
-                        "`operating_point` its frames run at (the model's own for that layout where it "
-                        "has one).")
+                        "`max_cost_ratio`: its px at most against the trained strip's), its "
+                        "`longest_person_ratio` (the server's `--longest-person-ratio` or the record's "
+                        "own; null: no bound) and the `operating_point` its frames run at (the "
+                        "model's own for that layout where it has one).")
 async def get_camera(state: State, camera_id: str = CameraId) -> dict[str, Any]:
     camera = await run_in_threadpool(state.registry.get, camera_id)
     if camera is None:
@@ -108,7 +109,8 @@ def _plan_or_refuse(plan: Callable[[FisheyeCamera], ViewPlan | None], camera: Fi
                 "match the path when given; `max_view_pixels` gives the camera its own view budget, at "
                 "most the server's `--max-camera-view-pixels` (422 `view_budget_over_limit` above it); "
                 "`second_look_pixels` its own second look in place of the server's `--second-look` "
-                "(0: none). "
+                "(0: none); `longest_person_ratio` its own bound on a detection's length along the ray "
+                "in place of the server's `--longest-person-ratio` (1-10 standing adults; 0: none). "
                 "Answers 201 when the camera is new, 200 when replaced.",
     openapi_extra={"requestBody": {"required": True, "content": {
         "application/json": {"schema": _record_schema()}}}},

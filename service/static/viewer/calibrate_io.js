@@ -20,7 +20,8 @@ export function marksFromCsv(text, source, imageWh, frameWh, firstId) {
 /**
  * The record Save writes: the fitted lens (or, with no marks, the saved one, else `start`: the
  * starting camera of the frame's image circle), the saved camera's
- * `site`, `site_pose` and `second_look_pixels` (what the calibration does not decide), and `masks`
+ * `site`, `site_pose`, `second_look_pixels` and `longest_person_ratio` (what the calibration does not
+ * decide), and `masks`
  * (frame px of a `frameWh` frame; null keeps the saved ones).
  * Throws an Error when the marks give no camera to save.
  */
@@ -31,7 +32,7 @@ export function cameraRecord({ cameraId, saved, start = null, marks, fit, fitErr
   }
   const lens = fit ? fit.camera : (saved ?? start);
   if (!lens) throw new Error(`camera ${cameraId} is not in the registry and has no fit: click marks, or fit the image circle`);
-  const kept = ["site", "site_pose", "second_look_pixels"];
+  const kept = ["site", "site_pose", "second_look_pixels", "longest_person_ratio"];
   const place = Object.fromEntries(kept.filter((k) => saved?.[k] != null).map((k) => [k, saved[k]]));
   const masksPx = masks === null ? (saved?.masks_px ?? []) : masks.map((points) => rescalePoints(points, frameWh, lens.image_size));
   return { ...lens, ...place, id: cameraId, masks_px: masksPx };

@@ -281,6 +281,7 @@ def test_registry_calls_and_token(server: LiveServer, demo_camera: FisheyeCamera
             own.CopyFrom(camera)
             own.max_view_pixels = 2_000_000  # the camera's own view budget, within the server's limit
             own.second_look_pixels = 786_432  # and its own second look
+            own.longest_person_ratio = 1.8  # and its own bound on a person's length
             out["own"] = await stub.PutCamera(pb.PutCameraRequest(camera=own), metadata=auth)
             out["own_read"] = await stub.GetCamera(pb.GetCameraRequest(camera_id="grpc-cam"))
             own.max_view_pixels = 4_000_001  # over the default limit: refused, nothing written
@@ -307,6 +308,8 @@ def test_registry_calls_and_token(server: LiveServer, demo_camera: FisheyeCamera
     assert not out["put"].camera.HasField("max_view_pixels")
     assert out["own"].camera.second_look_pixels == out["own_read"].second_look_pixels == 786_432
     assert not out["put"].camera.HasField("second_look_pixels")
+    assert out["own"].camera.longest_person_ratio == out["own_read"].longest_person_ratio == 1.8
+    assert not out["put"].camera.HasField("longest_person_ratio")
     assert out["over"][0] == grpc.StatusCode.INVALID_ARGUMENT and "view_budget_over_limit" in out["over"][1]
     assert out["after_over"].max_view_pixels == 2_000_000
     assert "grpc-cam" in [c.id for c in out["list"].cameras]

@@ -174,6 +174,36 @@ def test_a_camera_whose_view_cannot_be_planned_is_refused(settings_for: Callable
         assert response.status_code == 422 and "budget of 4096 px" in response.json()["error"]["message"]
 
 
+def test_a_camera_record_sets_its_own_length_bound(settings_for: Callable[..., Settings]) -> None:
+    # A calibrated camera bounds its people's length (its record's longest_person_ratio) where the
+    # server does not; an uncalibrated one turns a server's bound off for itself (0).
+    with LiveServer(settings_for(model=DEFAULT_MODEL_PATH)) as live:
+        url = f"{live.url}/v1/cameras"
+        record = httpx.get(f"{url}/demo").json()
+        del record["view"]
+        saved = httpx.put(f"{url}/demo", json={**record, "longest_person_ratio": 1.8})
+        assert saved.status_code == 200 and saved.json()["longest_person_ratio"] == 1.8
+        view = httpx.get(f"{url}/demo").json()["view"]
+        assert view["longest_person_ratio"] == 1.8 and view["layout"] == "1band+nadir"
+        answer = httpx.post(f"{url}/demo/detect", content=(SAMPLES / "000001.jpg").read_bytes(),
+                            headers={"Content-Type": "image/jpeg"}, timeout=60)
+        assert answer.status_code == 200 and len(answer.json()["detections"]) >= 5
+        # out of range: refused, nothing written
+        for bad in (-1, 0.5, 10.5, "long"):
+            refused = httpx.put(f"{url}/demo", json={**record, "longest_person_ratio": bad})
+            assert refused.status_code == 422 and refused.json()["error"]["code"] == "invalid_camera"
+            assert "longest_person_ratio" in refused.json()["error"]["message"]
+        assert httpx.get(f"{url}/demo").json()["longest_person_ratio"] == 1.8
+        unbounded = {**record, "id": "twin", "longest_person_ratio": 0}
+        assert httpx.put(f"{url}/twin", json=unbounded).status_code == 201
+    with LiveServer(settings_for(model=DEFAULT_MODEL_PATH, longest_person_ratio=2.5)) as live:
+        url = f"{live.url}/v1/cameras"
+        assert httpx.get(f"{url}/demo").json()["view"]["longest_person_ratio"] == 1.8  # its own
+        assert httpx.get(f"{url}/twin").json()["view"]["longest_person_ratio"] is None  # 0: none
+        assert httpx.put(f"{url}/third", json={**record, "id": "third"}).status_code == 201
+        assert httpx.get(f"{url}/third").json()["view"]["longest_person_ratio"] == 2.5  # the server's
+
+
 def test_a_camera_record_sets_its_own_second_look(settings_for: Callable[..., Settings]) -> None:
     # A crowded scene's camera takes the second look (its record's second_look_pixels) where the
     # server runs none, and a camera may turn a server's look off for itself.
