@@ -15,7 +15,13 @@ from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from contract.model import SpinningPolicy
 from contract.views import DEFAULT_VIEW
-from fisheye.camera import MAX_SECOND_LOOK_PIXELS, MAX_VIEW_PIXELS, MIN_VIEW_PIXELS
+from fisheye.camera import (
+    MAX_LONGEST_PERSON_RATIO,
+    MAX_SECOND_LOOK_PIXELS,
+    MAX_VIEW_PIXELS,
+    MIN_LONGEST_PERSON_RATIO,
+    MIN_VIEW_PIXELS,
+)
 from fisheye.view_plan import SECOND_LOOK_FULL_PIXELS
 from models import DEFAULT_MODEL_PATH, DEMO_CAMERA_PATH
 from service.core.cpu import cpu_budget
@@ -77,7 +83,7 @@ class Settings(BaseSettings):
                                          "(a planned model only; 0: none; "
                                          f"{SECOND_LOOK_FULL_PIXELS}: 12 patches' px at their largest)")
     longest_person_ratio: float | None = Field(
-        None, ge=1, le=10,
+        None, ge=MIN_LONGEST_PERSON_RATIO, le=MAX_LONGEST_PERSON_RATIO,
         description="candidates longer along the ray than this many standing adults where their feet "
                     "stand are dropped before NMS (a planned model only; for calibrated cameras: at a "
                     "guessed altitude it drops real people; none by default)")
