@@ -25,7 +25,10 @@ each set is read again with every band's turn started that many columns further 
 every person; on the real sets that moves AP50 by up to 0.2, on the renders by 0.02. With both
 and `--together`, every scale is read at every start (20 reads for 5 scales and 4 starts), and the
 mean over all the reads is the figure heads are judged by (docs/DETECTOR.md, "The heads judged over
-scales and starts together").
+scales and starts together"). With `--fuse-turn COLUMNS` every read is two (`TurnFused`): the view
+as planned and the view turned that many columns further round, their detections fused, so that
+the network's cells fall twice on every person (test-time augmentation over the start, at twice
+the cost; docs/DETECTOR.md, "Two starts fused").
 
 The model must be a planned one (`fishloc export --planned`): the fixed strip is its one-band plan.
 """
@@ -45,11 +48,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from contract import ModelError, ModelRunner, OnnxModel, SessionThreads
-from contract.detect import ContractModel
+from contract import FrameDetections, ModelError, ModelRunner, OnnxModel, SessionThreads
+from contract.detect import ContractModel, FrameOutputs
 from contract.metadata import ModelInfo, OperatingPoint
 from contract.model import RawOutputs
 from contract.views import DEFAULT_VIEW, view_plan
+from fisheye import FisheyeCamera, rotated_nms
 from fisheye.camera import MAX_SECOND_LOOK_PIXELS
 from fisheye.view_plan import SECOND_LOOK_FULL_PIXELS, ViewPlanConfig
 
@@ -153,6 +157,51 @@ class NadirPair:
         return self.nadir.run_boxes(image)
 
 
+class TurnFused:
+    """`ModelRunner`'s reading of `view`, twice a frame: as planned, and with every band's turn
+    started `columns` further round (`turned_view`; the nadir view is the same in both). The two
+    reads' detections are fused: their union, then the rotated NMS again at the read's IoU. Every
+    person falls on the network's cells at two places (test-time augmentation over the start);
+    the bands cost twice their pixels."""
+
+    def __init__(self, model: ContractModel, view: ViewPlanConfig, columns: float,
+                 nms_iou: float | None = None) -> None:
+        views = (view, turned_view(view, columns))
+        self.runners = [ModelRunner(model, nms_iou=nms_iou, view=v) for v in views]
+        self.default_min_score = self.runners[0].default_min_score
+
+    def outputs(self, frames_rgb: Sequence[NDArray[np.uint8]], cameras: Sequence[FisheyeCamera]
+                ) -> list[list[FrameOutputs]]:
+        """Each read's raw outputs of the frames (`ModelRunner.outputs`)."""
+        return [runner.outputs(frames_rgb, cameras) for runner in self.runners]
+
+    def select(self, outputs: Sequence[Sequence[FrameOutputs]], min_score: float, nms_iou: float | None = None
+               ) -> list[FrameDetections]:
+        """Each read's detections at `min_score` and `nms_iou` (default: the view's point's), fused."""
+        reads = [runner.select(read, min_score, nms_iou)
+                 for runner, read in zip(self.runners, outputs, strict=True)]
+        return [fused(list(pair), nms_iou) for pair in zip(*reads, strict=True)]
+
+    def detect(self, frames_rgb: Sequence[NDArray[np.uint8]], cameras: Sequence[FisheyeCamera],
+               min_score: float) -> list[FrameDetections]:
+        return self.select(self.outputs(frames_rgb, cameras), min_score)
+
+
+def fused(reads: Sequence[FrameDetections], nms_iou: float | None) -> FrameDetections:
+    """One frame's detections of several reads as one: their union, then the rotated NMS at
+    `nms_iou` (default: the first read's view's point's), feet kept with their boxes."""
+    first = reads[0]
+    iou = nms_iou if nms_iou is not None else first.view_point.nms_iou if first.view_point else None
+    if iou is None:
+        raise ValueError("fusing reads needs an NMS IoU: give one or read through a view's point")
+    boxes = np.concatenate([r.boxes_cxcywh for r in reads])
+    scores = np.concatenate([r.scores for r in reads])
+    feet = None if any(r.foot_px is None for r in reads) else np.concatenate([r.foot_px for r in reads])
+    kept = rotated_nms(boxes, scores, first.principal_point, iou) if len(scores) else np.zeros(0, np.int64)
+    return dataclasses.replace(first, boxes_cxcywh=boxes[kept], scores=scores[kept],
+                               foot_px=None if feet is None else feet[kept])
+
+
 def evaluate_design(model: ContractModel, view: ViewPlanConfig, frames: Sequence[Any],
                     point: OperatingPoint | None = None) -> dict[str, Any]:
     """`fishloc eval`'s metrics of `model` on `frames` with views planned by `view`, and the mean
@@ -162,17 +211,24 @@ def evaluate_design(model: ContractModel, view: ViewPlanConfig, frames: Sequence
 
 
 def read_design(model: ContractModel, view: ViewPlanConfig, frames: Sequence[Any],
-                point: OperatingPoint | None = None, people: bool = False) -> Read:
-    """`evaluate_design`'s read, with each person's outcome where `people` (empty otherwise)."""
-    from detector.evaluate import RunnerPredictor, evaluate, frame_camera
+                point: OperatingPoint | None = None, people: bool = False,
+                fuse_turn: float | None = None) -> Read:
+    """`evaluate_design`'s read, with each person's outcome where `people` (empty otherwise); with
+    `fuse_turn`, two reads fused (`TurnFused`), their cost counted twice."""
+    from detector.evaluate import Predictor, RunnerPredictor, evaluate, frame_camera
     from detector.people import FOUND, breakdown, size_px
 
     min_score = None if point is None else point.min_score
-    evaluation = evaluate(RunnerPredictor(ModelRunner(model, nms_iou=None if point is None else point.nms_iou,
-                                                      view=view)), frames, min_score=min_score)
+    nms_iou = None if point is None else point.nms_iou
+    predictor: Predictor = (TurnFused(model, view, fuse_turn, nms_iou) if fuse_turn is not None
+                            else RunnerPredictor(ModelRunner(model, nms_iou=nms_iou, view=view)))
+    evaluation = evaluate(predictor, frames, min_score=min_score)
     metrics = evaluation.metrics
-    costs = [view_plan(model.info, frame_camera(frame), view).cost_ratio for frame in frames]
+    reads = 1 if fuse_turn is None else 2
+    costs = [reads * view_plan(model.info, frame_camera(frame), view).cost_ratio for frame in frames]
     chosen = {} if point is None else {"min_score": point.min_score, "nms_iou": point.nms_iou}
+    if fuse_turn is not None:
+        chosen["fused_turn"] = fuse_turn
     figures = {**{k: metrics.get(k) for k in FIGURES}, "cost_ratio": sum(costs) / len(costs), **chosen}
     names = [str(frame.path) for frame in frames]
     persons = breakdown(evaluation.frames, names, min_score)[0] if people else []
@@ -194,12 +250,22 @@ def read_sets(items: Sequence[str], limit: int | None) -> dict[str, list[Any]]:
     return sets
 
 
-def chosen_point(model: ContractModel, frames: Sequence[Any], view: ViewPlanConfig) -> OperatingPoint:
+def chosen_point(model: ContractModel, frames: Sequence[Any], view: ViewPlanConfig,
+                 fuse_turn: float | None = None) -> OperatingPoint:
     """The best-F1 operating point of `model` on validation `frames` in the views `view` plans
-    (`fishloc eval --operating-point`)."""
-    from detector.evaluate import choose_operating_point
+    (`fishloc eval --operating-point`), of the two reads fused where `fuse_turn` (`TurnFused`)."""
+    from detector.data.dataset import load_rgb
+    from detector.evaluate import EVAL_MIN_SCORE, choose_operating_point, eval_frame, frame_camera
+    from detector.operating_point import choose, sweep
 
-    best = choose_operating_point(model, frames, view=view)[0]
+    if fuse_turn is None:
+        best = choose_operating_point(model, frames, view=view)[0]
+        return OperatingPoint(best.min_score, best.nms_iou)
+    reader = TurnFused(model, view, fuse_turn)
+    outputs = reader.outputs([load_rgb(f) for f in frames], [frame_camera(f) for f in frames])
+    swept = sweep(lambda nms_iou: [eval_frame(frame, found) for frame, found in
+                                   zip(frames, reader.select(outputs, EVAL_MIN_SCORE, nms_iou), strict=True)])
+    best = swept[choose([point for point, _ in swept])][0]
     return OperatingPoint(best.min_score, best.nms_iou)
 
 
@@ -224,7 +290,8 @@ def turned_view(view: ViewPlanConfig, columns: float) -> ViewPlanConfig:
 
 def design_figures(design: str, model: ContractModel, view: ViewPlanConfig, sets: dict[str, list[Any]],
                    choose_on: Sequence[Any] | None, jitter: Sequence[float] = (),
-                   rotations: Sequence[float] = (), together: bool = False) -> dict[str, dict[str, Any]]:
+                   rotations: Sequence[float] = (), together: bool = False,
+                   fuse_turn: float | None = None) -> dict[str, dict[str, Any]]:
     """`evaluate_design` on every set, at the point chosen on `choose_on` (None: the model's own for
     each layout); the figures also go to stderr as one JSON line as soon as they are made. With
     `jitter`, each set is read again at each of those scale factors (`scaled_view`) at the same
@@ -235,21 +302,24 @@ def design_figures(design: str, model: ContractModel, view: ViewPlanConfig, sets
     is read at every start instead, each pair once (`..._by_read`, keyed "1.1x+8", and
     `..._over_reads`): the two draws of where a person falls in the cells, taken at once. With any
     reads again, each set's `people_over_reads` counts the people found in every read, in none and
-    in some (`steadiness`)."""
-    point = None if choose_on is None else chosen_point(model, choose_on, view)
+    in some (`steadiness`). With `fuse_turn`, every read is two fused (`TurnFused`), the point
+    chosen so too."""
+    point = None if choose_on is None else chosen_point(model, choose_on, view, fuse_turn)
     people = bool(jitter or rotations)
-    served = {name: read_design(model, view, frames, point, people) for name, frames in sets.items()}
+    served = {name: read_design(model, view, frames, point, people, fuse_turn)
+              for name, frames in sets.items()}
     figures = {name: read.figures for name, read in served.items()}
     found = {name: [read.found] for name, read in served.items()}
     if together:
         read_again(model, {f"{factor:g}x+{columns:g}": turned_view(scaled_view(view, factor), columns)
                            for factor in (1, *jitter) for columns in (0, *rotations)
-                           if (factor, columns) != (1, 0)}, "read", "1x+0", figures, found, sets, point)
+                           if (factor, columns) != (1, 0)}, "read", "1x+0", figures, found, sets, point,
+                   fuse_turn)
     else:
         read_again(model, {f"{factor:g}": scaled_view(view, factor) for factor in jitter}, "scale", "1",
-                   figures, found, sets, point)
+                   figures, found, sets, point, fuse_turn)
         read_again(model, {f"{columns:g}": turned_view(view, columns) for columns in rotations},
-                   "rotation", "0", figures, found, sets, point)
+                   "rotation", "0", figures, found, sets, point, fuse_turn)
     if people:
         for name, read in served.items():
             figures[name]["people_over_reads"] = steadiness(found[name], read.sizes_px)
@@ -278,7 +348,8 @@ def steadiness(found_by_read: Sequence[Sequence[bool]], sizes_px: Sequence[float
 
 def read_again(model: ContractModel, variants: dict[str, ViewPlanConfig], kind: str, served: str,
                figures: dict[str, dict[str, Any]], found: dict[str, list[list[bool]]],
-               sets: dict[str, list[Any]], point: OperatingPoint | None) -> None:
+               sets: dict[str, list[Any]], point: OperatingPoint | None,
+               fuse_turn: float | None = None) -> None:
     """Every set read with each variant of the view at `point`: the JITTERED figures of each, by
     label, beside the served read's (`served`), into `figures[set]["<figure>_by_<kind>"]`, and
     their mean, min and max into `"<figure>_over_<kind>s"`; who each read found onto `found[set]`."""
@@ -286,7 +357,7 @@ def read_again(model: ContractModel, variants: dict[str, ViewPlanConfig], kind: 
         return
     for label, view in variants.items():
         for name, frames in sets.items():
-            read = read_design(model, view, frames, point, people=True)
+            read = read_design(model, view, frames, point, people=True, fuse_turn=fuse_turn)
             for key in JITTERED:
                 by_label = figures[name].setdefault(f"{key}_by_{kind}", {served: figures[name][key]})
                 by_label[label] = read.figures[key]
@@ -389,6 +460,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--nadir-model", default=None, metavar="ONNX",
                         help="run the nadir view by this planned model and the rest by --model "
                              "(`NadirPair`: a head of its own for the nadir view, as two models)")
+    parser.add_argument("--fuse-turn", type=float, default=None, metavar="COLUMNS",
+                        help="read every frame twice, the second time with every band's turn started "
+                             "COLUMNS further round, and fuse the two reads' detections (their union, "
+                             "then the rotated NMS): test-time augmentation over the start, at twice "
+                             "the bands' cost")
     parser.add_argument("--threads", type=int, default=2, help="inference threads (default 2)")
     parser.add_argument("--json", type=Path, default=None, help="where to write every figure")
     args = parser.parse_args(argv)
@@ -407,6 +483,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise ValueError(f"--rotate-jitter columns must lie in (0, 2048), got {args.rotate_jitter}")
         if args.together and not (args.scale_jitter and args.rotate_jitter):
             raise ValueError("--together reads scales at starts: give --scale-jitter and --rotate-jitter")
+        if args.fuse_turn is not None and not 0 < args.fuse_turn < 2048:
+            raise ValueError(f"--fuse-turn columns must lie in (0, 2048), got {args.fuse_turn}")
     except (ModelError, DatasetFormatError, ValueError) as error:
         print(f"view_designs: {error}", file=sys.stderr)
         return 2
@@ -415,7 +493,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.design is not None and design not in args.design:
             continue
         results[design] = design_figures(design, model, view, sets, choose_on, args.scale_jitter,
-                                         args.rotate_jitter, args.together)
+                                         args.rotate_jitter, args.together, args.fuse_turn)
     report(results, args.json)
     return 0
 

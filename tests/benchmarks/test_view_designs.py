@@ -20,6 +20,7 @@ from benchmarks.view_designs import (
     DESIGNS,
     NadirPair,
     Read,
+    fused,
     main,
     markdown_table,
     read_design,
@@ -204,6 +205,60 @@ def test_a_nadir_pair_runs_the_nadir_view_by_its_second_model(tmp_path: Path) ->
     assert main(["--model", str(tmp_path / "strip.onnx"), "--nadir-model", str(tmp_path / "strip.onnx"),
                  *common, "--json", str(paired)]) == 0
     assert json.loads(out.read_text()) == json.loads(paired.read_text())
+
+
+def test_fused_reads_keep_each_person_once_at_the_better_score_with_its_feet() -> None:
+    from contract import FrameDetections
+    from contract.metadata import OperatingPoint
+
+    point = OperatingPoint(0.3, 0.4)
+    # one person seen by both reads (boxes 2 px apart), and one more person in each read alone
+    centre = (512.0, 512.0)
+    first = FrameDetections(np.array([[400.0, 300.0, 20.0, 40.0], [700.0, 500.0, 20.0, 40.0]]),
+                            np.array([0.9, 0.5]), centre, np.array([[400.0, 320.0], [700.0, 480.0]]), point)
+    second = FrameDetections(np.array([[402.0, 300.0, 20.0, 40.0], [200.0, 600.0, 20.0, 40.0]]),
+                             np.array([0.95, 0.4]), centre, np.array([[402.0, 321.0], [200.0, 590.0]]), point)
+    both = fused([first, second], None)  # at the reads' own IoU
+    assert both.scores.tolist() == [0.95, 0.5, 0.4]
+    assert both.boxes_cxcywh[0].tolist() == [402.0, 300.0, 20.0, 40.0]
+    assert both.foot_px is not None
+    assert both.foot_px.tolist() == [[402.0, 321.0], [700.0, 480.0], [200.0, 590.0]]
+    assert both.view_point == point
+    # an IoU of 0.99 keeps the two boxes of the one person apart
+    assert len(fused([first, second], 0.99).scores) == 4
+    without_feet = dataclasses.replace(second, foot_px=None)
+    assert fused([first, without_feet], None).foot_px is None
+
+
+def test_two_reads_fused_at_one_start_read_as_one_at_twice_the_cost() -> None:
+    from contract import OnnxModel, SessionThreads
+    from detector.data.readers import read_dataset
+
+    model = OnnxModel(ROOT / "models" / "fishloc-default.onnx", SessionThreads(intra_op=1))  # finds people
+    frames = read_dataset(ROOT / "samples" / "annotations.json")[:2]
+    view = DESIGNS[JITTERED_DESIGN]
+    once = read_design(model, view, frames).figures
+    twice = read_design(model, view, frames, fuse_turn=0.0).figures
+    assert once["AP50"] > 0.0  # people found, so that the fusion has something to keep or lose
+    keys = ("AP50", "precision", "recall", "AP_far", "mPE")
+    np.testing.assert_array_equal([twice[key] for key in keys], [once[key] for key in keys])  # NaN alike
+    assert twice["cost_ratio"] == pytest.approx(2 * once["cost_ratio"])
+    assert twice["fused_turn"] == 0.0 and "fused_turn" not in once
+
+
+def test_fuse_turn_reads_every_set_twice_at_a_point_chosen_fused(tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    model = save_polar_double(tmp_path / "planned.onnx", planned=True)
+    out = tmp_path / "fused.json"
+    samples = ROOT / "samples" / "annotations.json"
+    common = ["--model", str(model), "--data", f"samples={samples}", "--design", JITTERED_DESIGN,
+              "--limit", "2", "--threads", "1"]
+    assert main([*common, "--choose", str(samples), "--fuse-turn", "8", "--json", str(out)]) == 0
+    figures = json.loads(out.read_text())[JITTERED_DESIGN]["samples"]
+    assert figures["fused_turn"] == 8 and 0.0 <= figures["AP50"] <= 1.0
+    assert {"min_score", "nms_iou"} <= set(figures)
+    assert main([*common, "--fuse-turn", "0"]) == 2
+    assert "--fuse-turn" in capsys.readouterr().err
 
 
 def test_a_fixed_strip_model_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
