@@ -115,6 +115,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="the probability that a sample is the frame's nadir view (the upright crop "
                             "below the lens the default view runs beside the strip) rather than a strip "
                             "(default 0: strips alone)")
+    polar.add_argument("--rand-conv", type=float, default=0.0, metavar="P",
+                       help="the probability that a sample's colours and textures are redrawn by a random "
+                            "convolution, its shapes kept (RandConv; default 0: never): people found by "
+                            "their shape rather than by the renders' surfaces")
     polar.add_argument("--crop", type=int, default=0, metavar="COLUMNS",
                        help="train on strip windows of this many columns (a multiple of 32) around "
                             "the people, a fraction of the strip's cost per sample (default: whole strips)")
@@ -185,9 +189,9 @@ def yolox_view(args: argparse.Namespace) -> tuple[YoloxDetectorConfig, StripAugm
     """The network config and augmentation of `--view`; ValueError for flags of the other view."""
     if args.view == "fisheye":
         if (args.strip is not None or args.zoom != [1.0] or args.band_scale != [1.0] or args.inner_head
-                or args.unwrap_samples != 1 or args.nadir_view):
-            raise ValueError("--strip, --zoom, --band-scale, --unwrap-samples, --nadir-view and --inner-head "
-                             "are options of the polar view, not of --view fisheye")
+                or args.unwrap_samples != 1 or args.nadir_view or args.rand_conv):
+            raise ValueError("--strip, --zoom, --band-scale, --unwrap-samples, --nadir-view, --rand-conv and "
+                             "--inner-head are options of the polar view, not of --view fisheye")
         size = {} if args.input_size is None else {"input_size": args.input_size}
         rotation = True if args.rotation_aug is None else args.rotation_aug
         flip = 0.0 if args.no_flip else FrameAugment().flip
@@ -207,7 +211,8 @@ def yolox_view(args: argparse.Namespace) -> tuple[YoloxDetectorConfig, StripAugm
 def strip_augment(args: argparse.Namespace) -> StripAugment:
     """The strips' augmentation the polar view's flags ask for."""
     return StripAugment(radius_scales=tuple(args.zoom), band_scales=tuple(args.band_scale),
-                        crop_width=args.crop, unwrap_samples=args.unwrap_samples, nadir_view=args.nadir_view)
+                        crop_width=args.crop, unwrap_samples=args.unwrap_samples, nadir_view=args.nadir_view,
+                        rand_conv=args.rand_conv)
 
 
 def default_freeze(network: str) -> tuple[str, ...]:

@@ -82,10 +82,16 @@ class StripAugment:
     # turns back into each person's box (`nadir_labels`); its people have no foot labels (the
     # service takes their feet from the box). 0 (the default): strips alone.
     nadir_view: float = 0.0
+    # The probability that a sample's colours and textures are redrawn by a random convolution
+    # (`rand_conv`), its shapes kept: what tells a rendered person from a real one is their
+    # surfaces, and the head should not learn to find people by them. 0 (the default): never.
+    rand_conv: float = 0.0
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.nadir_view <= 1.0:
             raise ValueError(f"nadir_view must lie in [0, 1], got {self.nadir_view}")
+        if not 0.0 <= self.rand_conv <= 1.0:
+            raise ValueError(f"rand_conv must lie in [0, 1], got {self.rand_conv}")
         if not self.radius_scales or min(self.radius_scales) <= 0:
             raise ValueError(f"radius_scales must be positive, got {self.radius_scales}")
         if not self.band_scales or min(self.band_scales) < 0.5:
@@ -287,6 +293,28 @@ def photometric(image: NDArray[np.uint8], augment: Photometric, rng: np.random.G
     return np.asarray(out, dtype=np.uint8)
 
 
+RAND_CONV_SIZES = (1, 3, 5, 7)  # the random filters' sides, one drawn per image
+
+
+def rand_conv(image: NDArray[np.uint8], rng: np.random.Generator) -> NDArray[np.uint8]:
+    """An RGB image with its colours and fine textures redrawn, its edges kept (RandConv, Xu et al.,
+    ICLR 2021): the image through a random k × k filter mixing its three channels (k drawn from
+    `RAND_CONV_SIZES`, weights normal with variance 1 / (3 k²)), each channel brought back to the
+    image's own mean and spread, then blended with the image by a weight drawn from [0, 1]."""
+    side = int(rng.choice(RAND_CONV_SIZES))
+    weights = rng.normal(0.0, 1.0 / math.sqrt(3 * side * side), (3, 3, side, side)).astype(np.float32)
+    planes = image.astype(np.float32)
+    mixed = np.zeros_like(planes)
+    for out in range(3):
+        for channel in range(3):
+            mixed[..., out] += cv2.filter2D(planes[..., channel], -1, weights[out, channel],
+                                            borderType=cv2.BORDER_REFLECT)
+    mean, spread = planes.mean(axis=(0, 1)), planes.std(axis=(0, 1))
+    mixed = (mixed - mixed.mean(axis=(0, 1))) / (mixed.std(axis=(0, 1)) + 1e-6) * spread + mean
+    keep = rng.uniform(0.0, 1.0)
+    return np.clip(keep * planes + (1.0 - keep) * mixed, 0, 255).astype(np.uint8)
+
+
 def nadir_labels(nadir: NadirPiece, cxcywh: FloatArray) -> FloatArray:
     """(N, 4) radius-aligned frame boxes (cx, cy, across, along) -> (N, 4) upright `xyxy` boxes of
     the nadir view (its own px, pixel centres): each bounds the ellipse its person's box holds, the
@@ -436,9 +464,15 @@ class PolarStripDataset:
             return None
         image, labels = turn_square(*found, int(rng.integers(4)), bool(rng.random() < self.augment.flip))
         width = self.augment.crop_width or self.config.polar_width + self.config.polar_overlap
-        image = photometric(image, self.augment, rng)
+        image = self.surfaces(photometric(image, self.augment, rng), rng)
         image = pad_to(image, self.config.input_size, width, self.info.pad_value)
         return StripSample(image, labels + EDGE_TO_CENTRE_PX, np.full((len(labels), 3), np.nan))
+
+    def surfaces(self, image: NDArray[np.uint8], rng: np.random.Generator) -> NDArray[np.uint8]:
+        """`image` with its surfaces redrawn (`rand_conv`) at the rate `StripAugment.rand_conv` asks."""
+        if self.augment.rand_conv and rng.random() < self.augment.rand_conv:
+            return rand_conv(image, rng)
+        return image
 
     def __getitem__(self, index: int) -> StripSample:
         rng = np.random.default_rng((self.seed, self.epoch, index))
@@ -466,7 +500,7 @@ class PolarStripDataset:
         if self.augment.crop_width:
             image, labels, feet = crop_window(image, labels, feet, self.augment.crop_width, rng)
         image, labels, feet = crop_rows(image, labels, feet, self.config.input_size, rng)  # a band's rows
-        image = photometric(image, self.augment, rng)
+        image = self.surfaces(photometric(image, self.augment, rng), rng)
         image = pad_rows(image, self.config.input_size, self.info.pad_value)  # a band under scale 1
         edge = np.array([EDGE_TO_CENTRE_PX, EDGE_TO_CENTRE_PX, 0.0])
         return StripSample(image, labels + EDGE_TO_CENTRE_PX, feet + edge)

@@ -240,6 +240,7 @@ def test_cli_trains_the_fisheye_view_and_refuses_to_resume_a_polar_run(
         assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     assert _cli(tmp_path / "x", data, "fisheye", "--zoom", "0.8", "1.0") == 2
     assert _cli(tmp_path / "x", data, "fisheye", "--nadir-view", "0.5") == 2
+    assert _cli(tmp_path / "x", data, "fisheye", "--rand-conv", "0.5") == 2
     assert main(["train", "--view", "fisheye", "--data", str(data), "--out", str(tmp_path / "y")]) == 2
 
 

@@ -30,6 +30,7 @@ from detector.yolox.strips import (
     frame_strip,
     nadir_labels,
     place_labels,
+    rand_conv,
     roll_strip,
     training_info,
     turn_square,
@@ -203,6 +204,34 @@ def test_a_nadir_sample_is_the_served_nadir_view_turned(toy_dataset: Callable[..
                    and np.allclose(sample.labels_xyxy - EDGE_TO_CENTRE_PX, turned) for image, turned in turns)
     with pytest.raises(ValueError, match="nadir_view"):
         StripAugment(nadir_view=1.5)
+
+
+def test_rand_conv_redraws_surfaces_and_keeps_each_colours_level() -> None:
+    rng = np.random.default_rng(0)
+    image = np.zeros((64, 96, 3), np.uint8)
+    image[16:48, 30:60] = (200, 40, 90)  # a figure on a plain ground
+    image = (image + rng.integers(0, 30, image.shape)).astype(np.uint8)
+    redrawn = [rand_conv(image, np.random.default_rng(seed)) for seed in range(8)]
+    np.testing.assert_array_equal(redrawn[0], rand_conv(image, np.random.default_rng(0)))  # reproducible
+    assert all(r.shape == image.shape and r.dtype == np.uint8 for r in redrawn)
+    assert sum(not np.array_equal(r, image) for r in redrawn) >= 7
+    # each channel keeps the image's mean (clipping aside) and the figure still stands out of its ground
+    for r in redrawn:
+        np.testing.assert_allclose(r.reshape(-1, 3).mean(axis=0), image.reshape(-1, 3).mean(axis=0), atol=12)
+        inside, outside = r[20:44, 34:56].astype(float), r[:, :20].astype(float)
+        assert np.abs(inside.mean(axis=(0, 1)) - outside.mean(axis=(0, 1))).max() > 10
+
+
+def test_a_rand_conv_sample_keeps_its_labels_and_redraws_its_image(toy_dataset: Callable[..., Path]) -> None:
+    frames = read_dataset(toy_dataset(count=1, size=128, people=16, seed=2))
+    plain = PolarStripDataset(frames, CONFIG, StripAugment.none(), seed=3)[0]
+    redrawing = dataclasses.replace(StripAugment.none(), rand_conv=1.0)
+    redrawn = PolarStripDataset(frames, CONFIG, redrawing, seed=3)[0]
+    assert len(plain.labels_xyxy) and np.array_equal(plain.labels_xyxy, redrawn.labels_xyxy)
+    np.testing.assert_array_equal(plain.feet, redrawn.feet)
+    assert plain.image.shape == redrawn.image.shape and not np.array_equal(plain.image, redrawn.image)
+    with pytest.raises(ValueError, match="rand_conv"):
+        StripAugment(rand_conv=-0.1)
 
 
 def test_the_strip_cache_stops_at_its_bound_with_the_same_samples(toy_dataset: Callable[..., Path]) -> None:
