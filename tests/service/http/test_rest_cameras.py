@@ -26,6 +26,17 @@ def lobby(altitude_m: float = 3.0) -> dict[str, Any]:
             "focal_px": [380.0, 380.0], "kb": [1.0, -0.02]}
 
 
+def assert_field_refused(url: str, record: dict[str, Any], field: str, values: tuple[Any, ...]) -> None:
+    """PUT `url` with `record`'s `field` at each of `values`: each a 422 `invalid_camera` naming the
+    field, the camera's stored `field` the same afterwards."""
+    stored = httpx.get(url).json()[field]
+    for bad in values:
+        refused = httpx.put(url, json={**record, field: bad})
+        assert refused.status_code == 422 and refused.json()["error"]["code"] == "invalid_camera"
+        assert field in refused.json()["error"]["message"]
+    assert httpx.get(url).json()[field] == stored
+
+
 def test_crud_without_a_token(live_server: LiveServer, demo_camera: FisheyeCamera) -> None:
     url = f"{live_server.url}/v1/cameras"
     listed = httpx.get(url).json()
@@ -188,12 +199,7 @@ def test_a_camera_record_sets_its_own_length_bound(settings_for: Callable[..., S
         answer = httpx.post(f"{url}/demo/detect", content=(SAMPLES / "000001.jpg").read_bytes(),
                             headers={"Content-Type": "image/jpeg"}, timeout=60)
         assert answer.status_code == 200 and len(answer.json()["detections"]) >= 5
-        # out of range: refused, nothing written
-        for bad in (-1, 0.5, 10.5, "long"):
-            refused = httpx.put(f"{url}/demo", json={**record, "longest_person_ratio": bad})
-            assert refused.status_code == 422 and refused.json()["error"]["code"] == "invalid_camera"
-            assert "longest_person_ratio" in refused.json()["error"]["message"]
-        assert httpx.get(f"{url}/demo").json()["longest_person_ratio"] == 1.8
+        assert_field_refused(f"{url}/demo", record, "longest_person_ratio", (-1, 0.5, 10.5, "long"))
         unbounded = {**record, "id": "twin", "longest_person_ratio": 0}
         assert httpx.put(f"{url}/twin", json=unbounded).status_code == 201
     with LiveServer(settings_for(model=DEFAULT_MODEL_PATH, longest_person_ratio=2.5)) as live:
@@ -226,12 +232,7 @@ def test_a_camera_record_sets_its_own_second_look(settings_for: Callable[..., Se
         plain = httpx.post(f"{url}/twin/detect", content=sample, headers=jpeg, timeout=60)
         assert looked.status_code == plain.status_code == 200
         assert looked.json()["detections"] != plain.json()["detections"]
-        # out of range: refused, nothing written
-        for bad in (-1, 64 * 256 * 256 + 1, 1.5):
-            refused = httpx.put(f"{url}/demo", json={**record, "second_look_pixels": bad})
-            assert refused.status_code == 422 and refused.json()["error"]["code"] == "invalid_camera"
-            assert "second_look_pixels" in refused.json()["error"]["message"]
-        assert httpx.get(f"{url}/demo").json()["second_look_pixels"] == 786_432
+        assert_field_refused(f"{url}/demo", record, "second_look_pixels", (-1, 64 * 256 * 256 + 1, 1.5))
         # 0: no look for this camera, whatever the server's
         no_look = {**record, "id": "twin", "second_look_pixels": 0}
         assert httpx.put(f"{url}/twin", json=no_look).status_code == 200
