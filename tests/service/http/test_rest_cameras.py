@@ -26,6 +26,16 @@ def lobby(altitude_m: float = 3.0) -> dict[str, Any]:
             "focal_px": [380.0, 380.0], "kb": [1.0, -0.02]}
 
 
+def put_demo_field(url: str, field: str, value: Any) -> dict[str, Any]:
+    """The demo camera's record at `url` (the cameras route) written again with `field` at `value`,
+    checked stored; the record as read (its view left out) for further writes."""
+    record = httpx.get(f"{url}/demo").json()
+    del record["view"]
+    saved = httpx.put(f"{url}/demo", json={**record, field: value})
+    assert saved.status_code == 200 and saved.json()[field] == value
+    return record
+
+
 def assert_field_refused(url: str, record: dict[str, Any], field: str, values: tuple[Any, ...]) -> None:
     """PUT `url` with `record`'s `field` at each of `values`: each a 422 `invalid_camera` naming the
     field, the camera's stored `field` the same afterwards."""
@@ -190,10 +200,7 @@ def test_a_camera_record_sets_its_own_length_bound(settings_for: Callable[..., S
     # server does not; an uncalibrated one turns a server's bound off for itself (0).
     with LiveServer(settings_for(model=DEFAULT_MODEL_PATH)) as live:
         url = f"{live.url}/v1/cameras"
-        record = httpx.get(f"{url}/demo").json()
-        del record["view"]
-        saved = httpx.put(f"{url}/demo", json={**record, "longest_person_ratio": 1.8})
-        assert saved.status_code == 200 and saved.json()["longest_person_ratio"] == 1.8
+        record = put_demo_field(url, "longest_person_ratio", 1.8)
         view = httpx.get(f"{url}/demo").json()["view"]
         assert view["longest_person_ratio"] == 1.8 and view["layout"] == "1band+nadir"
         answer = httpx.post(f"{url}/demo/detect", content=(SAMPLES / "000001.jpg").read_bytes(),
@@ -217,10 +224,7 @@ def test_a_camera_record_sets_its_own_second_look(settings_for: Callable[..., Se
     jpeg = {"Content-Type": "image/jpeg"}
     with LiveServer(settings_for(model=DEFAULT_MODEL_PATH)) as live:
         url = f"{live.url}/v1/cameras"
-        record = httpx.get(f"{url}/demo").json()
-        del record["view"]
-        saved = httpx.put(f"{url}/demo", json={**record, "second_look_pixels": 786_432})
-        assert saved.status_code == 200 and saved.json()["second_look_pixels"] == 786_432
+        record = put_demo_field(url, "second_look_pixels", 786_432)
         view = httpx.get(f"{url}/demo").json()["view"]
         points = httpx.get(f"{live.url}/v1/model").json()["view_operating_points"]
         assert view["layout"] == "1band+nadir+look" and view["operating_point"] == points["1band+nadir+look"]
