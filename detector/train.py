@@ -130,6 +130,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="the coarse foot point's weight in the foot loss against each pass of the "
                             "refiner, whose point the graph serves (default 1: their plain mean)")
     polar.add_argument("--distill", type=float, default=None, help="λ of the COCO distillation (default 1.0)")
+    polar.add_argument("--distill-features", type=float, default=0.0, metavar="λ",
+                       help="hold the backbone's and the neck's features on every level to the "
+                            "teacher's (0: off); for runs that train the backbone")
     polar.add_argument("--teacher", default=None, metavar="PATH.onnx|PATH.pt",
                        help="distil from this network (a COCO ONNX or a polar checkpoint of the same "
                             "network) instead of the one --init-from starts from, e.g. the COCO "
@@ -315,6 +318,7 @@ def run_polar(args: argparse.Namespace) -> int:
             batch_size=args.batch_size or defaults.batch_size, lr=args.lr or defaults.lr,
             freeze=default_freeze(args.network) if args.freeze is None else tuple(args.freeze),
             distill=defaults.distill if args.distill is None else args.distill,
+            feature_distill=args.distill_features,
             foot_max_metres_per_px=(defaults.foot_max_metres_per_px if args.foot_metres_cap is None
                                     else args.foot_metres_cap),
             foot_coarse_weight=(defaults.foot_coarse_weight if args.foot_coarse_weight is None

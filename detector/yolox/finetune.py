@@ -4,7 +4,9 @@
 
 The student starts as the COCO person network (`init_from_pretrained`); a frozen copy of it, the
 teacher, scores every strip too, and the loss's `distill` term keeps the student's scores where no
-label says otherwise (`detector.yolox.loss`). A run that goes on from a fine-tuned checkpoint may
+label says otherwise (`detector.yolox.loss`); with `feature_distill` the backbone's and the neck's
+pyramids are held to the teacher's too, on every level and cell (`feature_distillation`), so that a
+run training the backbone keeps what the teacher sees. A run that goes on from a fine-tuned checkpoint may
 name another teacher (`teacher`: e.g. the COCO network itself, so that what the checkpoint's head
 already traded away is held to COCO and not to the checkpoint). The first backbone stages stay
 frozen (`freeze`; `foot` freezes the foot branch, so a head trained on its own leaves the feet as
@@ -25,12 +27,13 @@ import copy
 import json
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
 import torch
-from torch import nn
+from torch import Tensor, nn
 
 from detector.checkpoint import (
     Checkpoint,
@@ -51,7 +54,7 @@ from detector.yolox.fisheye import ARCH as FISHEYE_ARCH
 from detector.yolox.fisheye import FisheyeDetectorConfig
 from detector.yolox.foot import MAX_METRES_PER_PX
 from detector.yolox.frames import FisheyeFrameDataset, FrameAugment
-from detector.yolox.loss import PolarDetectionLoss, PolarLossConfig
+from detector.yolox.loss import PolarDetectionLoss, PolarLossConfig, feature_distillation
 from detector.yolox.network import YoloxNano
 from detector.yolox.polar import ARCH as POLAR_ARCH
 from detector.yolox.polar import PolarDetectorConfig
@@ -88,6 +91,9 @@ class FinetuneConfig:
     grad_clip: float = 10.0
     freeze: tuple[str, ...] = ("stem", "dark2", "dark3")  # of STAGES
     distill: float = 1.0  # λ
+    # λ of the backbone's and the neck's features held to the teacher's on every level and cell (0:
+    # off); a run that trains the backbone keeps what the teacher sees, the head free to read it anew
+    feature_distill: float = 0.0
     iou_weight: float = 5.0
     foot_max_metres_per_px: float = MAX_METRES_PER_PX  # cap of a person's foot-loss weight
     foot_coarse_weight: float = 1.0  # the coarse foot point's weight against each refiner pass
@@ -108,6 +114,8 @@ class FinetuneConfig:
         if not self.foot_coarse_weight >= 0:  # NaN too
             weight = self.foot_coarse_weight
             raise ValueError(f"the coarse foot point's weight must be 0 or more, got {weight}")
+        if not self.feature_distill >= 0:  # NaN too
+            raise ValueError(f"the feature distillation's λ must be 0 or more, got {self.feature_distill}")
 
 
 YoloxDetectorConfig = PolarDetectorConfig | FisheyeDetectorConfig
@@ -152,6 +160,26 @@ def stage_parameters(model: YoloxNano | NanoDetPlus, stage: str) -> list[nn.Para
     return list(module.parameters())
 
 
+class PyramidTap:
+    """The last feature pyramids of a network, kept by forward hooks for `feature_distillation`:
+    the backbone's three levels (which a foot branch's own neck reads) and the neck's three (which
+    the head reads)."""
+
+    def __init__(self, network: YoloxNano | NanoDetPlus) -> None:
+        self.levels: dict[str, list[Tensor]] = {}
+        for part in ("backbone", "neck"):
+            network.get_submodule(part).register_forward_hook(self._keeper(part))
+
+    def _keeper(self, part: str) -> Any:
+        def keep(module: nn.Module, inputs: Any, output: Sequence[Tensor]) -> None:
+            self.levels[part] = list(output)
+        return keep
+
+    @property
+    def features(self) -> list[Tensor]:
+        return [level for part in ("backbone", "neck") for level in self.levels[part]]
+
+
 class Finetuner:
     """Fine-tunes `initial` (a person-only YoloxNano of `model_config`, either view, or a polar
     NanoDetPlus) into `out/`."""
@@ -174,6 +202,7 @@ class Finetuner:
         self.model.to(self.device)
         start = self.model if teacher is None else teacher
         self.teacher = copy.deepcopy(start).to(self.device).eval().requires_grad_(False)
+        self.taps = (PyramidTap(self.model), PyramidTap(self.teacher)) if config.feature_distill > 0 else None
         frozen = {id(p) for stage in config.freeze for p in stage_parameters(self.model, stage)}
         for parameter in self.model.parameters():
             parameter.requires_grad_(id(parameter) not in frozen)
@@ -272,9 +301,11 @@ class Finetuner:
         images, labels = collate_strips(samples)
         images = images.to(self.device)
         teacher_maps = None
-        if self.config.distill > 0:
+        if self.config.distill > 0 or self.taps is not None:
             with torch.no_grad():
                 teacher_maps = self.teacher(images)
+            if self.config.distill <= 0:
+                teacher_maps = None  # the teacher ran for its features alone
         model, loss = self.model, self.loss
         if isinstance(model, YoloxNano) and model.foot is not None and isinstance(loss, PolarDetectionLoss):
             feet = collate_feet(samples)
@@ -284,6 +315,10 @@ class Finetuner:
             terms = loss(maps, labels, teacher_maps, offsets, feet, refine)
         else:
             terms = loss(model(images), labels, teacher_maps)
+        if self.taps is not None:
+            student, teacher = self.taps
+            terms["features"] = feature_distillation(student.features, teacher.features)
+            terms["total"] = terms["total"] + self.config.feature_distill * terms["features"]
         self.optimizer.zero_grad(set_to_none=True)
         if terms["total"].requires_grad:  # not when only the foot trains and no label has a floor point
             terms["total"].backward()
@@ -354,6 +389,7 @@ class Finetuner:
             log.write(json.dumps(json_safe(record), default=float) + "\n")
         if self.progress:
             summary = {k: round(v, 4) for k, v in {**train_terms, **val}.items()
-                       if k in ("total", "distill", "AP50", "mAP", "AP_near", "AP_mid", "AP_far", "recall")}
+                       if k in ("total", "distill", "features", "AP50", "mAP", "AP_near", "AP_mid", "AP_far",
+                                "recall")}
             print(f"epoch {self.epoch}: {json.dumps(summary)} ({record['seconds']} s)", flush=True)
         return record

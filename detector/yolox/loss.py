@@ -135,6 +135,18 @@ def person_log_probs(flat: Tensor) -> tuple[Tensor, Tensor]:
     return log_p, log_not_p
 
 
+def feature_distillation(student: Sequence[Tensor], teacher: Sequence[Tensor]) -> Tensor:
+    """Feature pyramids held to the teacher's (`--distill-features`): per level, the mean
+    squared difference over the teacher's mean square, averaged over the levels. Zero exactly where
+    the student's pyramid is the teacher's; a level's scale does not weigh it; 1 for a student whose
+    features are all zero."""
+    if len(student) != len(teacher) or not student:
+        raise ValueError(f"feature distillation needs the same levels, got {len(student)} and {len(teacher)}")
+    terms = [functional.mse_loss(s, t.detach()) / (t.detach().square().mean() + EPS)
+             for s, t in zip(student, teacher, strict=True)]
+    return torch.stack(terms).mean()
+
+
 def binary_kl(teacher: Tensor, student: Tensor) -> Tensor:
     """Element-wise KL(Bernoulli(p_t) ‖ Bernoulli(p_s)) of raw rows (teacher's, student's)."""
     log_t, log_not_t = person_log_probs(teacher)
