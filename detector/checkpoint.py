@@ -189,10 +189,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--wise-ft", metavar="PRETRAINED_ONNX", default=None,
                         help="interpolate the fine-tuned head towards the COCO head of this ONNX, the one "
                              "it started from (YOLOX-Nano or NanoDet-Plus-m; WiSE-FT)")
+    parser.add_argument("--wise-from", metavar="START.pt", default=None,
+                        help="interpolate every weight towards this checkpoint, the one a run that "
+                             "trained the whole network started from (WiSE-FT of the whole network)")
     parser.add_argument("--wise-alpha", type=float, default=0.9,
-                        help="weight of the fine-tuned head in that interpolation (default 0.9)")
+                        help="weight of the fine-tuned network in that interpolation (default 0.9)")
     args = parser.parse_args(argv)
+    if args.wise_ft is not None and args.wise_from is not None:
+        parser.error("--wise-ft and --wise-from are two interpolations: choose one")
+    from detector.yolox.wise import wise_checkpoint, wise_from_checkpoint  # which imports this module
+
     try:
+        if args.wise_from is not None:  # refused before anything is written
+            wise_from_checkpoint(load_checkpoint(args.source), args.wise_from, args.wise_alpha)
         info = load_checkpoint(args.source).info
         info = ModelInfo(model_version=args.model_version or info.model_version,
                          trained_on=args.trained_on or info.trained_on,
@@ -203,9 +212,10 @@ def main(argv: list[str] | None = None) -> int:
         graph = {name: True for name in ("peaks", "planned") if getattr(args, name)}
         shipped = save_release(args.source, args.target, info, graph)
         if args.wise_ft is not None:
-            from detector.yolox.wise import wise_checkpoint
-
             shipped = wise_checkpoint(shipped, args.wise_ft, args.wise_alpha)
+            save_checkpoint(args.target, shipped)
+        if args.wise_from is not None:
+            shipped = wise_from_checkpoint(shipped, args.wise_from, args.wise_alpha)
             save_checkpoint(args.target, shipped)
     except CheckpointError as error:
         print(f"detector.checkpoint: {error}", file=sys.stderr)

@@ -5,7 +5,9 @@ fine-tuned network with its pretrained start, θ = α·θ_fine-tuned + (1 − α
 most of what fine-tuning gained on its own data while recovering what the start knew elsewhere. For
 FishLoc only the head was fine-tuned (backbone and neck frozen, the foot branch on its own copy of
 the neck), so only the head's weights are interpolated; everything else stays as it is and must be
-the same in both networks.
+the same in both networks. A run that trained the whole network from a FishLoc checkpoint
+(`fishloc train --distill-features`) is interpolated whole towards that checkpoint
+(`interpolate_network`, `wise_from_checkpoint`): the paper's full form.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from dataclasses import replace
 
 import torch
 
-from detector.checkpoint import Checkpoint, CheckpointError
+from detector.checkpoint import Checkpoint, CheckpointError, load_checkpoint
 from detector.nanodet.network import NanoDetPlus
 from detector.yolox.network import YoloxNano
 from detector.yolox.polar import PolarDetectorConfig, init_network_from_pretrained
@@ -65,4 +67,39 @@ def wise_checkpoint(checkpoint: Checkpoint, pretrained_path: str, alpha: float) 
         state = interpolate_head(fine_tuned.state_dict(), pretrained, alpha)
     except (ValueError, OSError) as error:
         raise CheckpointError(f"{pretrained_path}: {error}") from None
+    return replace(checkpoint, model_state=state, training_state={})
+
+
+def interpolate_network(fine_tuned: dict[str, torch.Tensor], start: dict[str, torch.Tensor], alpha: float
+                        ) -> dict[str, torch.Tensor]:
+    """State dicts -> each floating tensor α·fine-tuned + (1 − α)·start, every other tensor the
+    fine-tuned one's. ValueError when α is outside [0, 1] or the two networks' tensors differ in
+    names or shapes."""
+    if not 0.0 <= alpha <= 1.0:
+        raise ValueError(f"alpha must lie in [0, 1], got {alpha}")
+    if set(fine_tuned) != set(start):
+        differ = sorted(set(fine_tuned) ^ set(start))
+        raise ValueError(f"the two networks' weights differ in names: {', '.join(differ[:4])}")
+    blended: dict[str, torch.Tensor] = {}
+    for name, tensor in fine_tuned.items():
+        if start[name].shape != tensor.shape:
+            raise ValueError(f"{name} is {tuple(tensor.shape)} in one network and {tuple(start[name].shape)} "
+                             "in the other")
+        blended[name] = (alpha * tensor + (1.0 - alpha) * start[name].to(tensor.dtype)
+                         if tensor.is_floating_point() else tensor)
+    return blended
+
+
+def wise_from_checkpoint(checkpoint: Checkpoint, start_path: str, alpha: float) -> Checkpoint:
+    """`checkpoint` with every weight interpolated towards the checkpoint at `start_path`, the one
+    its run started from (`--init-from`): the same network, view and graph options, weights
+    only; CheckpointError when that cannot be done (a file that does not load, another network)."""
+    start = load_checkpoint(start_path)
+    if start.config != checkpoint.config:
+        raise CheckpointError(f"{start_path} is another network or view ({start.config.to_dict()}) than "
+                              f"the one interpolated ({checkpoint.config.to_dict()})")
+    try:
+        state = interpolate_network(checkpoint.model_state, start.model_state, alpha)
+    except ValueError as error:
+        raise CheckpointError(f"{start_path}: {error}") from None
     return replace(checkpoint, model_state=state, training_state={})
