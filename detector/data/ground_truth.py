@@ -4,10 +4,15 @@ A person's box is the tightest radius-aligned box of its visible silhouette: the
 are projected on the radial and tangential axes through the box centre, the centre moves to the
 middle of those extents, and that repeats until the centre's ray stops turning; the final box is
 symmetric about its centre, so it holds every silhouette pixel and is radius-aligned exactly.
+Boxes of the whole silhouette (`whole_uv`: each person drawn alone, what hides it ignored) follow
+the convention of hand-drawn boxes, which take in a person's hidden legs too (CrowdHuman's full
+box beside its visible one); which people count and which are ignored stays the visible
+silhouette's decision either way.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,8 +70,11 @@ def _axes(centre: FloatArray, pp: FloatArray) -> tuple[FloatArray, FloatArray]:
 
 def people_truth(person_id: NDArray[np.int32], unoccluded_px: NDArray[np.int64],
                  locations_m: FloatArray, principal_point: tuple[float, float],
-                 min_visible_fraction: float, min_visible_px: int) -> list[PersonTruth]:
-    """Ground truth of every person with at least one visible pixel, in person order."""
+                 min_visible_fraction: float, min_visible_px: int,
+                 whole_uv: Sequence[FloatArray] | None = None) -> list[PersonTruth]:
+    """Ground truth of every person with at least one visible pixel, in person order; with
+    `whole_uv` (each person's pixels drawn alone, `RenderOutput.whole_uv`) their boxes are the whole
+    silhouette's, not the visible one's."""
     rows, cols = np.nonzero(person_id >= 0)
     ids = person_id[rows, cols]
     order = np.argsort(ids, kind="stable")
@@ -78,6 +86,8 @@ def people_truth(person_id: NDArray[np.int32], unoccluded_px: NDArray[np.int64],
         if hi == lo:
             continue
         uv = np.stack([cols[lo:hi], rows[lo:hi]], axis=1).astype(np.float64)
+        if whole_uv is not None and len(whole_uv[person]):
+            uv = whole_uv[person]
         box = radius_aligned_box(uv, np.asarray(principal_point))
         x_min, y_min = uv.min(axis=0) - _PIXEL_HALF
         x_max, y_max = uv.max(axis=0) + _PIXEL_HALF

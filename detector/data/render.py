@@ -3,7 +3,8 @@
 Each group of primitives (a person, a table, a car) is intersected only with the rays of the
 pixel rectangle its bounding capsule projects to, and each primitive only with the rays that pass
 its bounding sphere, so a frame with 60 people stays fast. The id image of the z-buffer gives every
-person's visible silhouette; rendering the person alone in its rectangle gives its unoccluded size.
+person's visible silhouette; rendering the person alone in its rectangle gives its unoccluded size
+and its whole silhouette, what hides it ignored (the amodal silhouette a hand-drawn box takes in).
 """
 
 from __future__ import annotations
@@ -69,11 +70,13 @@ class Lighting:
 @dataclass(frozen=True)
 class RenderOutput:
     """`image` (H, W, 3) linear RGB float32; `person_id` (H, W) int32 (NO_PERSON where none);
-    `unoccluded_px` (P,) pixels each person covers when drawn alone (within the image circle)."""
+    `unoccluded_px` (P,) pixels each person covers when drawn alone (within the image circle);
+    `whole_uv` those pixels' centres (N_p, 2) (u, v) per person: the whole silhouette."""
 
     image: Image32
     person_id: NDArray[np.int32]
     unoccluded_px: NDArray[np.int64]
+    whole_uv: tuple[FloatArray, ...] = ()
 
 
 def _pattern(prim: Primitive, points: FloatArray) -> FloatArray:
@@ -199,8 +202,10 @@ class StaticScene:
 
 
 def _draw(grid: RayGrid, layer: Layer, groups: list[Group],
-          bounds: list[tuple[FloatArray, FloatArray, float]], unoccluded: NDArray[np.int64]) -> None:
-    """Draw `groups` into `layer` (in place) by the z-buffer; count each person's pixels alone."""
+          bounds: list[tuple[FloatArray, FloatArray, float]], unoccluded: NDArray[np.int64],
+          whole: list[FloatArray] | None = None) -> None:
+    """Draw `groups` into `layer` (in place) by the z-buffer; count each person's pixels alone,
+    and where `whole` is given put their (u, v) centres in it, by person."""
     cam = grid.camera
     origin = grid.origin
     for group, (a, b, radius) in zip(groups, bounds, strict=True):
@@ -214,6 +219,9 @@ def _draw(grid: RayGrid, layer: Layer, groups: list[Group],
         hit = np.isfinite(t) & valid
         if group.person != NO_PERSON:
             unoccluded[group.person] = int(hit.sum())
+            if whole is not None:
+                hit_rows, hit_cols = np.divmod(np.flatnonzero(hit), x1 - x0)
+                whole[group.person] = np.stack([hit_cols + x0, hit_rows + y0], axis=1).astype(np.float64)
         region_t = layer.t[y0:y1, x0:x1].reshape(-1)
         front = np.flatnonzero(hit & (t < region_t))
         if front.size == 0:
@@ -248,8 +256,9 @@ def render(grid: RayGrid, static: StaticScene, groups: list[Group], lighting: Li
         raise ValueError("the lighting's direction differs from the static scene's")
     layer = static.layer.copy()
     unoccluded = np.zeros(n_people, np.int64)
+    whole = [np.zeros((0, 2)) for _ in range(n_people)]
     bounds = [g.bound() for g in groups]
-    _draw(grid, layer, groups, bounds, unoccluded)
+    _draw(grid, layer, groups, bounds, unoccluded, whole)
     light_dir = np.asarray(lighting.direction, dtype=np.float64)
     # Static shadows hold where the static surfaces still show; new surfaces are tested afresh.
     new = layer.drawn & ~static.layer.drawn | (layer.t < static.layer.t)
@@ -275,7 +284,8 @@ def render(grid: RayGrid, static: StaticScene, groups: list[Group], lighting: Li
     ceiling = (kind == CEILING) & ~layer.drawn
     image[ceiling] = albedo[ceiling] * ambient.mean()
     image[~grid.valid] = 0.0
-    return RenderOutput(image=image, person_id=layer.person_id, unoccluded_px=unoccluded)
+    return RenderOutput(image=image, person_id=layer.person_id, unoccluded_px=unoccluded,
+                        whole_uv=tuple(whole))
 
 
 def _shadows(grid: RayGrid, t_buf: Image32, normal: Image32, groups: list[Group],

@@ -26,6 +26,7 @@ from detector.data.sensor import develop, encode_jpeg, sample_sensor
 from fisheye import FisheyeCamera
 
 FloatArray = NDArray[np.float64]
+BOX_KINDS = ("visible", "whole")  # `SynthConfig.boxes`, `fishloc synth --boxes`
 
 
 @dataclass(frozen=True)
@@ -34,7 +35,8 @@ class SynthConfig:
     scene `style`s (comma-separated; scene i gets the (i mod count)-th),
     `people` (min, max) per frame (None: the default mix of 0-60), a fixed `camera` (None: each
     scene's own), `images_per_scene`, and the visibility under which a person is only an
-    ignore region (`min_visible_fraction`, `min_visible_px`)."""
+    ignore region (`min_visible_fraction`, `min_visible_px`); `boxes` "visible" (the visible
+    silhouette's, the default) or "whole" (the whole silhouette's, what hides it ignored)."""
 
     size: int = 640
     kind: str | None = None
@@ -45,6 +47,11 @@ class SynthConfig:
     min_visible_fraction: float = 0.15
     min_visible_px: int = 20
     jpeg_quality: int | None = None
+    boxes: str = "visible"
+
+    def __post_init__(self) -> None:
+        if self.boxes not in BOX_KINDS:
+            raise ValueError(f"boxes must be one of {', '.join(BOX_KINDS)}, got {self.boxes!r}")
 
 
 @dataclass(frozen=True)
@@ -159,7 +166,8 @@ def render_frame_with_ids(seed: int, split: str, index: int, config: SynthConfig
     output = render(grid, _static_cache[static_key], groups, lighting, len(people))
     locations = np.array([p.location_m for p in people]).reshape(-1, 2)
     truths = people_truth(output.person_id, output.unoccluded_px, locations, camera.principal_point,
-                          config.min_visible_fraction, config.min_visible_px)
+                          config.min_visible_fraction, config.min_visible_px,
+                          output.whole_uv if config.boxes == "whole" else None)
     settings = sample_sensor(rng, night)
     if config.jpeg_quality is not None:
         settings = type(settings)(**{**settings.__dict__, "jpeg_quality": config.jpeg_quality})

@@ -20,7 +20,7 @@ from detector.data.scenes import KINDS, STYLES
 from detector.data.sequence import SequenceConfig
 from detector.data.sequence_writer import write_sequence
 from detector.data.site_world import default_plan, load_plan
-from detector.data.synth import SynthConfig
+from detector.data.synth import BOX_KINDS, SynthConfig
 from detector.data.synth_writer import ANNOTATIONS_FILE, default_workers, write_dataset
 from fisheye import CalibrationError, load_camera
 
@@ -61,6 +61,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "people over the whole sequence (default 18 a minute, at least 10)")
     parser.add_argument("--images-per-scene", type=int, default=4, help="frames rendered per scene")
     parser.add_argument("--jpeg-quality", type=int, help="fixed JPEG quality (default: random 70-95)")
+    parser.add_argument("--boxes", choices=BOX_KINDS, default="visible",
+                        help="each person's box: of the visible silhouette (default) or of the whole "
+                             "one, what hides the person ignored, as hand-drawn boxes are (frames only)")
     parser.add_argument("--workers", type=int, default=default_workers(),
                         help="worker processes (default: all cores)")
     sequence = parser.add_argument_group("sequences (--sequence)")
@@ -95,7 +98,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"fishloc synth: {error}", file=sys.stderr)
             return 2
     config = SynthConfig(size=args.size, kind=args.kind, style=args.style, people=args.people, camera=camera,
-                         images_per_scene=args.images_per_scene, jpeg_quality=args.jpeg_quality)
+                         images_per_scene=args.images_per_scene, jpeg_quality=args.jpeg_quality,
+                         boxes=args.boxes)
     started = time.perf_counter()
     with tqdm(total=args.images, unit="img", disable=args.quiet) as bar:
         document = write_dataset(args.out, args.images, args.seed, args.split, config,

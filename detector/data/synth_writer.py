@@ -118,6 +118,8 @@ def write_dataset(out_dir: str | Path, images: int, seed: int, split: str, confi
             "kind": config.kind or "mixed",
             "style": config.style or "mixed",
             "images_per_scene": config.images_per_scene,
+            "boxes": ("the whole silhouette's, what hides a person ignored" if config.boxes == "whole"
+                      else "the visible silhouette's"),
             "ignore_rule": (f"iscrowd=1 when visible_fraction < {config.min_visible_fraction} "
                             f"or fewer than {config.min_visible_px} visible pixels"),
         },

@@ -2,6 +2,7 @@
 
 from functools import cache
 
+import cv2
 import numpy as np
 import pytest
 
@@ -118,3 +119,29 @@ def test_demo_camera_frames_use_the_demo_lens() -> None:
     frame, _ = _frame("demo", 0)
     demo = load_camera(DEMO_CAMERA_PATH).scaled_to((288, 288))
     assert frame.camera == demo
+
+
+def test_whole_silhouette_boxes_of_a_rendered_office() -> None:
+    """The same frame with each person's box of the whole silhouette: the same image and people,
+    every box holding the visible one's pixels, and the people behind desks boxed larger."""
+    visible_config = SynthConfig(size=320, style="office", people=(10, 14), images_per_scene=2)
+    whole_config = SynthConfig(size=320, style="office", people=(10, 14), images_per_scene=2, boxes="whole")
+    visible, ids = render_frame_with_ids(11, "seen", 0, visible_config)
+    whole, _ = render_frame_with_ids(11, "seen", 0, whole_config)
+    assert whole.jpeg == visible.jpeg
+    assert [(p.person, p.ignore, p.visible_px) for p in whole.people] == \
+        [(p.person, p.ignore, p.visible_px) for p in visible.people]
+    pp = np.asarray(whole.camera.principal_point)
+    grown = 0
+    for seen, drawn in zip(visible.people, whole.people, strict=True):
+        rows, cols = np.nonzero(ids == seen.person)
+        corners = cxcywh_to_corners(np.asarray(drawn.rotated_box)[None], pp)[0]
+        distances = [cv2.pointPolygonTest(corners.astype(np.float32), (float(c), float(r)), True)
+                     for r, c in zip(rows, cols, strict=True)]
+        assert min(distances) >= -1.0  # every visible pixel lies in the whole box
+        area = drawn.rotated_box[2] * drawn.rotated_box[3]
+        assert area >= 0.95 * seen.rotated_box[2] * seen.rotated_box[3]
+        grown += area > 1.2 * seen.rotated_box[2] * seen.rotated_box[3]
+    assert grown >= 1
+    with pytest.raises(ValueError, match="boxes"):
+        SynthConfig(boxes="amodal")

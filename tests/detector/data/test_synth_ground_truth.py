@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from detector.data.ground_truth import people_truth, radius_aligned_box
+from detector.data.ground_truth import PersonTruth, people_truth, radius_aligned_box
 from fisheye import cxcywh_to_corners
 
 PP = np.array([100.0, 90.0])
@@ -68,3 +68,22 @@ def test_people_truth_from_an_id_image() -> None:
     assert not first.ignore
     assert first.distance_m == pytest.approx(np.hypot(1, 2))
     assert last.visible_fraction == pytest.approx(0.1) and last.ignore
+
+
+def test_whole_silhouette_boxes_take_in_what_hides_a_person() -> None:
+    ids = np.full((50, 60), -1, np.int32)
+    ids[10:20, 30:34] = 0  # the visible part of person 0: its lower half hidden behind something
+    ids[40:45, 5:9] = 1  # person 1 in the open
+    rows, cols = np.mgrid[10:30, 30:34]
+    whole = [np.stack([cols.ravel(), rows.ravel()], axis=1).astype(np.float64), np.zeros((0, 2))]
+    locations = np.array([[1.0, 2.0], [3.0, 4.0]])
+    visible = people_truth(ids, np.array([80, 20]), locations, (25.0, 25.0), 0.15, 10)
+    drawn = people_truth(ids, np.array([80, 20]), locations, (25.0, 25.0), 0.15, 10, whole)
+    assert visible[0].bbox == (29.5, 9.5, 4.0, 10.0)
+    assert drawn[0].bbox == (29.5, 9.5, 4.0, 20.0)  # the hidden half is in the box
+    def area(truth: PersonTruth) -> float:
+        return truth.rotated_box[2] * truth.rotated_box[3]
+    assert area(drawn[0]) > 1.8 * area(visible[0])
+    # who counts stays the visible silhouette's decision; a person without whole pixels keeps its box
+    assert drawn[0].visible_px == 40 and drawn[0].visible_fraction == pytest.approx(0.5)
+    assert drawn[1] == visible[1]
