@@ -135,19 +135,25 @@ def load_model(path: str | Path) -> tuple[nn.Module, Checkpoint]:
     return checkpoint.build(path), checkpoint
 
 
-def save_release(source: str | Path, target: str | Path, info: ModelInfo | None = None,
-                 graph: dict[str, bool] | None = None) -> Checkpoint:
-    """Copy a training checkpoint without its training state (optimizer, schedule, RNG): the file
-    to ship and to fine-tune from with `fishloc train --init`, a third of the size. `info`, when
-    given, replaces what the model says about itself (version, data, threshold); `graph` sets
-    fields of a polar config that shape only the exported graph (`peaks`, `planned`)."""
+def release_of(source: str | Path, info: ModelInfo | None = None,
+               graph: dict[str, bool] | None = None) -> Checkpoint:
+    """A training checkpoint without its training state (optimizer, schedule, RNG), in memory:
+    the file to ship and to fine-tune from with `fishloc train --init`, a third of the size.
+    `info`, when given, replaces what the model says about itself (version, data, threshold);
+    `graph` sets fields of a polar config that shape only the exported graph (`peaks`, `planned`)."""
     checkpoint = load_checkpoint(source)
     config = checkpoint.config
     if graph:
         if not hasattr(config, "planned"):
             raise CheckpointError(f"{source}: --peaks and --planned need a polar network")
         config = dataclasses.replace(config, **graph)  # type: ignore[arg-type]
-    release = Checkpoint(config, checkpoint.model_state, info or checkpoint.info, {})
+    return Checkpoint(config, checkpoint.model_state, info or checkpoint.info, {})
+
+
+def save_release(source: str | Path, target: str | Path, info: ModelInfo | None = None,
+                 graph: dict[str, bool] | None = None) -> Checkpoint:
+    """`release_of(source, info, graph)` written to `target`."""
+    release = release_of(source, info, graph)
     save_checkpoint(target, release)
     return release
 
@@ -200,8 +206,6 @@ def main(argv: list[str] | None = None) -> int:
     from detector.yolox.wise import wise_checkpoint, wise_from_checkpoint  # which imports this module
 
     try:
-        if args.wise_from is not None:  # refused before anything is written
-            wise_from_checkpoint(load_checkpoint(args.source), args.wise_from, args.wise_alpha)
         info = load_checkpoint(args.source).info
         info = ModelInfo(model_version=args.model_version or info.model_version,
                          trained_on=args.trained_on or info.trained_on,
@@ -210,13 +214,13 @@ def main(argv: list[str] | None = None) -> int:
                          nms_iou=info.nms_iou if args.nms_iou is None else args.nms_iou,
                          view_points={**info.view_points, **parse_view_point_args(args.view_point)})
         graph = {name: True for name in ("peaks", "planned") if getattr(args, name)}
-        shipped = save_release(args.source, args.target, info, graph)
+        shipped = release_of(args.source, info, graph)
+        # Either interpolation is made in memory and refused before anything is written.
         if args.wise_ft is not None:
             shipped = wise_checkpoint(shipped, args.wise_ft, args.wise_alpha)
-            save_checkpoint(args.target, shipped)
         if args.wise_from is not None:
             shipped = wise_from_checkpoint(shipped, args.wise_from, args.wise_alpha)
-            save_checkpoint(args.target, shipped)
+        save_checkpoint(args.target, shipped)
     except CheckpointError as error:
         print(f"detector.checkpoint: {error}", file=sys.stderr)
         return 2

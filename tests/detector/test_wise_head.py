@@ -127,5 +127,9 @@ def test_cli_interpolates_a_whole_run_towards_its_start_and_refuses_another_netw
     assert main([run, str(tmp_path / "refused.pt"), "--wise-from", str(tmp_path / "other.pt")]) == 2
     assert "another network or view" in capsys.readouterr().err
     assert not (tmp_path / "refused.pt").exists()
+    missing = str(tmp_path / "missing.onnx")  # the head's interpolation refused: nothing written either
+    assert main([run, str(tmp_path / "refused.pt"), "--wise-ft", missing]) == 2
+    assert "missing.onnx" in capsys.readouterr().err
+    assert not (tmp_path / "refused.pt").exists()
     with pytest.raises(SystemExit):
         main([run, str(tmp_path / "both.pt"), "--wise-from", start_path, "--wise-ft", str(COCO_ONNX)])
