@@ -135,13 +135,13 @@ def load_model(path: str | Path) -> tuple[nn.Module, Checkpoint]:
     return checkpoint.build(path), checkpoint
 
 
-def release_of(source: str | Path, info: ModelInfo | None = None,
-               graph: dict[str, bool] | None = None) -> Checkpoint:
+def release_of(checkpoint: Checkpoint, info: ModelInfo | None = None,
+               graph: dict[str, bool] | None = None, source: str | Path = "the checkpoint") -> Checkpoint:
     """A training checkpoint without its training state (optimizer, schedule, RNG), in memory:
     the file to ship and to fine-tune from with `fishloc train --init`, a third of the size.
     `info`, when given, replaces what the model says about itself (version, data, threshold);
-    `graph` sets fields of a polar config that shape only the exported graph (`peaks`, `planned`)."""
-    checkpoint = load_checkpoint(source)
+    `graph` sets fields of a polar config that shape only the exported graph (`peaks`, `planned`);
+    `source` names the checkpoint in errors."""
     config = checkpoint.config
     if graph:
         if not hasattr(config, "planned"):
@@ -152,8 +152,8 @@ def release_of(source: str | Path, info: ModelInfo | None = None,
 
 def save_release(source: str | Path, target: str | Path, info: ModelInfo | None = None,
                  graph: dict[str, bool] | None = None) -> Checkpoint:
-    """`release_of(source, info, graph)` written to `target`."""
-    release = release_of(source, info, graph)
+    """The release of the training checkpoint at `source` (`release_of`) written to `target`."""
+    release = release_of(load_checkpoint(source), info, graph, source)
     save_checkpoint(target, release)
     return release
 
@@ -206,7 +206,8 @@ def main(argv: list[str] | None = None) -> int:
     from detector.yolox.wise import wise_checkpoint, wise_from_checkpoint  # which imports this module
 
     try:
-        info = load_checkpoint(args.source).info
+        source = load_checkpoint(args.source)
+        info = source.info
         info = ModelInfo(model_version=args.model_version or info.model_version,
                          trained_on=args.trained_on or info.trained_on,
                          default_min_score=info.default_min_score if args.min_score is None
@@ -214,7 +215,7 @@ def main(argv: list[str] | None = None) -> int:
                          nms_iou=info.nms_iou if args.nms_iou is None else args.nms_iou,
                          view_points={**info.view_points, **parse_view_point_args(args.view_point)})
         graph = {name: True for name in ("peaks", "planned") if getattr(args, name)}
-        shipped = release_of(args.source, info, graph)
+        shipped = release_of(source, info, graph, args.source)
         # Either interpolation is made in memory and refused before anything is written.
         if args.wise_ft is not None:
             shipped = wise_checkpoint(shipped, args.wise_ft, args.wise_alpha)
